@@ -1,0 +1,140 @@
+// Plain value types of the ROS-free ROVER core.
+//
+// Units: metres and radians everywhere inside the core. loop_fusion hands relative yaw in
+// degrees (its loop_info[7]); candidateFromLoopInfo() converts at the boundary.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <limits>
+#include <string>
+
+namespace rover_loop_fusion {
+namespace core {
+
+/// Degrees of freedom of the pose graph.
+/// kFourDof: x, y, z, yaw (roll and pitch fixed from the VIO pose) — loop_fusion with IMU.
+/// kSixDof: full SE(3) — loop_fusion without IMU (visual odometry).
+enum class Mode { kFourDof, kSixDof };
+
+/// How the positions before and after the trial optimisation are aligned before scoring.
+/// kSE3 when scale is observable (VIO, stereo); kSim3 for monocular VO.
+enum class Alignment { kSE3, kSim3 };
+
+/// Why a verdict came out the way it did. Exactly one per verdict.
+enum class Reason {
+  kAccepted,             ///< solve converged and score <= threshold
+  kScoreAboveThreshold,  ///< solve converged but the trajectory deformed too much
+  kNotConverged,         ///< the solver stopped without converging (or failed)
+  kNoTrajectoryPrior,    ///< query and match are in sequences nothing connects yet
+  kInvalidInput,         ///< the candidate or the graph state is not usable
+  kTimeBudgetExceeded,   ///< the solve ran past config.time_budget_ms
+};
+
+/// snake_case name used in messages, logs and CSV ("score_above_threshold", ...).
+const char* toString(Reason reason);
+const char* toString(Mode mode);
+const char* toString(Alignment alignment);
+bool parseMode(const std::string& s, Mode* mode);
+bool parseAlignment(const std::string& s, Alignment* alignment);
+
+struct Pose {
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  Pose() = default;
+  Pose(const Eigen::Vector3d& t_, const Eigen::Quaterniond& q_) : t(t_), q(q_) {}
+};
+
+/// A loop candidate that passed geometric verification (PnP/RANSAC in loop_fusion).
+/// The relative pose is the query keyframe expressed in the match keyframe's frame, exactly
+/// what loop_fusion stores in KeyFrame::loop_info.
+struct LoopCandidate {
+  int64_t query_index = -1;  ///< the newer keyframe (loop_fusion: cur_kf->index)
+  int64_t match_index = -1;  ///< the older keyframe (loop_fusion: old_kf->index / loop_index)
+  Eigen::Vector3d relative_t = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond relative_q = Eigen::Quaterniond::Identity();
+  double relative_yaw = 0.0;  ///< radians; used by the 4-DoF graph
+  int inliers = -1;           ///< feature inliers of the geometric check, -1 if unknown
+};
+
+/// Builds a candidate from loop_fusion's loop_info layout
+/// [t_x, t_y, t_z, q_w, q_x, q_y, q_z, relative_yaw_degrees].
+LoopCandidate candidateFromLoopInfo(int64_t query_index, int64_t match_index,
+                                    const double loop_info[8], int inliers = -1);
+
+struct Verdict {
+  int64_t query_index = -1;
+  int64_t match_index = -1;
+  bool accepted = false;
+  Reason reason = Reason::kInvalidInput;
+  double score = std::numeric_limits<double>::quiet_NaN();  ///< RMSE of aligned positions [m]
+  double threshold = std::numeric_limits<double>::quiet_NaN();
+  std::string detail;     ///< human-readable explanation (what was wrong, what was done)
+  bool converged = false;
+  int iterations = 0;     ///< solver iterations of the trial optimisation
+  int window_size = 0;    ///< keyframes optimised and scored
+  double solve_ms = 0.0;  ///< Ceres time
+  double elapsed_ms = 0.0;  ///< whole verify() call
+};
+
+/// Result of calls that can refuse input (addKeyframe, commit). Never throws.
+struct Status {
+  bool ok = true;
+  std::string message;
+  static Status Ok() { return Status(); }
+  static Status Error(std::string msg) {
+    Status s;
+    s.ok = false;
+    s.message = std::move(msg);
+    return s;
+  }
+  explicit operator bool() const { return ok; }
+};
+
+struct VerifierConfig {
+  Mode mode = Mode::kFourDof;
+  Alignment alignment = Alignment::kSE3;
+  /// Accept iff score <= threshold [m]. The paper: 0.5 indoor, 1.0 outdoor.
+  double threshold = 0.5;
+  /// Policy for candidates between sequences that nothing connects yet (no prior to test
+  /// against). true = accept as upstream loop_fusion does when merging maps.
+  bool accept_without_prior = true;
+  /// Trial optimisation limits. A solve that stops on either limit did not converge and the
+  /// candidate is rejected (fail closed). time_budget_ms <= 0 disables the time limit.
+  int max_iterations = 50;
+  double time_budget_ms = 200.0;
+  /// Relative cost change at which the trial optimisation counts as converged. 1e-4 changes
+  /// scores by millimetres against Ceres' default 1e-6 and saves about 40 % of the iterations.
+  double function_tolerance = 1e-4;
+  /// Odometry edges from each keyframe to its previous N keyframes of the same sequence
+  /// (loop_fusion uses 4).
+  int odometry_neighbours = 4;
+  /// Huber scale of committed loop edges (loop_fusion: HuberLoss(0.1)).
+  double loop_huber = 0.1;
+  /// Whether the candidate itself gets the Huber loss in the trial optimisation. ROVER asks
+  /// "how would the trajectory deform if this loop were true", so by default it does not:
+  /// a robust loss would let a false loop pull only weakly and hide the tear.
+  bool robust_candidate = false;
+  /// Keyframes before the match keyframe that are also optimised and scored (the trial
+  /// window is [match - window_margin, newest]; everything older is held fixed).
+  int window_margin = 0;
+  /// Plausibility limits of a candidate's relative pose (loop_fusion's findConnection drops
+  /// |t| >= 20 m and |yaw| >= 30 deg). Beyond them the candidate is invalid input.
+  double max_relative_translation = 20.0;
+  double max_relative_yaw = 30.0 * M_PI / 180.0;
+  /// true: keyframe poses arrive in the raw VIO frame of their sequence (the standalone node
+  /// fed from /vins_estimator/keyframe_pose) and the verifier applies the sequence anchoring
+  /// shift itself. false: the caller already did (patched loop_fusion hands poses after its
+  /// w_r_vio / w_t_vio shift).
+  bool anchor_incoming_keyframes = false;
+  /// Tolerance on | |q| - 1 | for quaternions handed in.
+  double quaternion_tolerance = 1e-3;
+
+  /// Empty when usable; otherwise says which field is wrong and why.
+  std::string validate() const;
+};
+
+}  // namespace core
+}  // namespace rover_loop_fusion
