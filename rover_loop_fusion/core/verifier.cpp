@@ -554,7 +554,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   return finish(Reason::kAccepted, true, s.str());
 }
 
-Status Verifier::commit(const LoopCandidate& c) {
+Status Verifier::commit(const LoopCandidate& c, bool update_estimate) {
   std::lock_guard<std::mutex> lock(mutex_);
   Impl& m = *impl_;
   size_t qpos = 0, mpos = 0;
@@ -586,11 +586,11 @@ Status Verifier::commit(const LoopCandidate& c) {
   ++m.revision;
   m.pending.valid = false;
 
-  if (reuse) {
+  if (reuse && update_estimate) {
     m.adoptSolution(p.positions, p.states);
     return Status::Ok();
   }
-  if (qseq == 0 && mseq == 0) return Status::Ok();  // both fixed: nothing moves
+  if (!update_estimate || (qseq == 0 && mseq == 0)) return Status::Ok();  // (both fixed: nothing moves)
   Impl::Trial tr;
   m.buildTrial(tr, m.windowStart(mpos), m.root(qseq), false, nullptr, nullptr);
   const Impl::SolveOutcome o = m.solve(tr, config_.max_iterations, 0.0);

@@ -67,7 +67,9 @@ class Verifier {
   /// of a loaded map, loops accepted without a prior, an override) the graph is solved once.
   /// A first loop between two sequences anchors the query's sequence to the match's frame
   /// exactly as loop_fusion shifts it (w_r_vio / w_t_vio).
-  Status commit(const LoopCandidate& candidate);
+  /// update_estimate=false only adds the edge (no solve; X unchanged): for replaying a saved
+  /// map or building an accept-all baseline that is solved once at the end.
+  Status commit(const LoopCandidate& candidate, bool update_estimate = true);
 
   size_t keyframeCount() const;
   size_t loopCount() const;

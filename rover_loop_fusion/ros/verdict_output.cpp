@@ -1,5 +1,7 @@
 #include "rover_loop_fusion/ros/verdict_output.h"
 
+#include "rover_loop_fusion/core/verdict_csv.h"
+
 #include <visualization_msgs/MarkerArray.h>
 
 #include <cerrno>
@@ -11,16 +13,6 @@
 namespace rover_loop_fusion {
 
 namespace {
-
-std::string csvField(const std::string& s) {
-  std::string out = "\"";
-  for (char ch : s) {
-    if (ch == '"') out += "\"\"";
-    else if (ch == '\n' || ch == '\r') out += ' ';
-    else out += ch;
-  }
-  return out + "\"";
-}
 
 geometry_msgs::Point point(const Eigen::Vector3d& p) {
   geometry_msgs::Point q;
@@ -55,21 +47,6 @@ LoopVerdict toMsg(const core::Verdict& v, const VerdictContext& ctx, const std::
   return m;
 }
 
-std::string csvHeader() {
-  return "query_stamp,match_stamp,query_index,match_index,accepted,reason,score,threshold,converged,"
-         "iterations,window_size,solve_ms,elapsed_ms,inliers,verifier,detail";
-}
-
-std::string csvRow(const LoopVerdict& m) {
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(9) << m.query_stamp.toSec() << ',' << m.match_stamp.toSec()
-    << ',' << m.query_index << ',' << m.match_index << ',' << (m.accepted ? 1 : 0) << ','
-    << m.reason << ',' << std::setprecision(6) << m.score << ',' << m.threshold << ','
-    << (m.converged ? 1 : 0) << ',' << m.iterations << ',' << m.window_size << ',' << m.solve_ms
-    << ',' << m.elapsed_ms << ',' << m.inliers << ',' << m.verifier << ',' << csvField(m.detail);
-  return s.str();
-}
-
 VerdictOutput::~VerdictOutput() {
   if (csv_) std::fclose(csv_);
 }
@@ -85,7 +62,7 @@ bool VerdictOutput::initialize(ros::NodeHandle& nh, const Options& options, std:
       return false;
     }
     if (std::ftell(csv_) == 0) {
-      std::fprintf(csv_, "%s\n", csvHeader().c_str());
+      std::fprintf(csv_, "%s\n", core::verdictCsvHeader().c_str());
       std::fflush(csv_);
     }
   }
@@ -96,7 +73,7 @@ LoopVerdict VerdictOutput::publish(const core::Verdict& verdict, const VerdictCo
   const LoopVerdict m = toMsg(verdict, ctx, options_.frame_id);
   verdict_pub_.publish(m);
   if (csv_) {
-    std::fprintf(csv_, "%s\n", csvRow(m).c_str());
+    std::fprintf(csv_, "%s\n", core::verdictCsvRow(verdict, ctx.query_stamp, ctx.match_stamp, ctx.inliers, ctx.verifier).c_str());
     std::fflush(csv_);
   }
   if (options_.markers && ctx.have_positions) {

@@ -27,10 +27,6 @@ struct VerdictContext {
 
 LoopVerdict toMsg(const core::Verdict& v, const VerdictContext& ctx, const std::string& frame_id);
 
-/// Header line and row of the CSV verdict log (one row per verdict).
-std::string csvHeader();
-std::string csvRow(const LoopVerdict& m);
-
 class VerdictOutput {
  public:
   struct Options {

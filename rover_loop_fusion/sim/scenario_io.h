@@ -1,0 +1,51 @@
+// Scenario directories: plain-text keyframes, candidates and ground truth, the common input
+// of rover_replay (core only) and the Python tools (simulator, benchmarks, evaluation).
+// Format (docs/scenario-format.md), comma separated, '#' comments, a header line first:
+//   keyframes.csv    index,stamp,sequence,x,y,z,qx,qy,qz,qw        (VIO pose)
+//   candidates.csv   query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label
+//                    (query in match frame; relative_yaw [rad]; label 1 true, 0 false, -1 unknown)
+//   groundtruth.csv  index,x,y,z,qx,qy,qz,qw                      (optional)
+#pragma once
+
+#include "rover_loop_fusion/core/types.h"
+
+#include <string>
+#include <vector>
+
+namespace rover_loop_fusion {
+namespace sim {
+
+struct ScenarioKeyframe {
+  int64_t index = 0;
+  double stamp = 0.0;
+  int sequence = 0;
+  core::Pose vio;
+};
+
+struct ScenarioCandidate {
+  core::LoopCandidate candidate;
+  int label = -1;
+};
+
+struct Scenario {
+  std::vector<ScenarioKeyframe> keyframes;
+  std::vector<ScenarioCandidate> candidates;  ///< in file order
+  std::vector<int64_t> truth_index;
+  std::vector<core::Pose> truth;  ///< empty without groundtruth.csv
+};
+
+/// Parses CSV text of one of the three files. On error returns false and sets `error` to
+/// "<name>:<line>: what". Values are parsed, not judged: NaN or an unknown index is the
+/// verifier's business.
+bool parseKeyframes(const std::string& text, const std::string& name,
+                    std::vector<ScenarioKeyframe>* out, std::string* error);
+bool parseCandidates(const std::string& text, const std::string& name,
+                     std::vector<ScenarioCandidate>* out, std::string* error);
+bool parseGroundTruth(const std::string& text, const std::string& name,
+                      std::vector<int64_t>* index, std::vector<core::Pose>* out, std::string* error);
+
+/// Reads a scenario directory (groundtruth.csv optional).
+bool loadScenario(const std::string& dir, Scenario* out, std::string* error);
+
+}  // namespace sim
+}  // namespace rover_loop_fusion
