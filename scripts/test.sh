@@ -1,11 +1,21 @@
 #!/usr/bin/env bash
-# The whole test suite: set-up on first use, then every gtest and rostest of the package.
+# The whole test suite: set-up on first use, then every gtest, rostest and pytest of the
+# package. Ends with 'rover tests: N passed, M failed, K skipped'; exit status 1 if any test
+# failed, errored or could not run.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 cd "$ROVER_WS"
-# Build and run the tests; catkin_make run_tests does not fail on test failures, so the
-# result is read back with catkin_test_results (non-zero exit on any failure or error).
+# catkin_make run_tests builds and runs the gtests and rostests; it does not fail on test
+# failures, which are read back from the JUnit files by test_summary.py below.
 catkin_make run_tests -DPYTHON_EXECUTABLE=/usr/bin/python3 -j"$(nproc)" > "$ROVER_WS/test.log" 2>&1 || {
   tail -n 80 "$ROVER_WS/test.log"; echo "[rover] building or running the tests failed; log: $ROVER_WS/test.log" >&2; exit 1; }
 grep -E '^\[( +OK|  FAILED|  PASSED|==========)|^(SUMMARY|\[ROSTEST\])|FAILURE|ERROR' "$ROVER_WS/test.log" | grep -v '^\[       OK' || true
-/usr/bin/python3 "$ROVER_ROOT/scripts/test_summary.py" "$ROVER_WS/build/test_results"
+# Python tools (simulator, evaluation): pytest writes JUnit XML next to catkin's results.
+# Exit 1 = some tests failed (counted from the XML); anything else means pytest could not run.
+pytest_rc=0
+ROVER_WS="$ROVER_WS" /usr/bin/python3 -m pytest -q -p no:cacheprovider "$ROVER_ROOT/test/python" \
+  --junitxml="$ROVER_WS/build/test_results/rover_loop_fusion/pytest-python.xml" || pytest_rc=$?
+summary_rc=0
+/usr/bin/python3 "$ROVER_ROOT/scripts/test_summary.py" "$ROVER_WS/build/test_results" || summary_rc=$?
+if [ "$pytest_rc" -gt 1 ]; then echo "[rover] pytest could not run (exit $pytest_rc)" >&2; exit 1; fi
+exit "$summary_rc"

@@ -4,7 +4,7 @@
 //
 //   rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]
 //                [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]
-//                [--window_margin N] [--robust_candidate] [--quiet]
+//                [--window_margin N] [--time_budget_ms MS] [--robust_candidate] [--quiet]
 //
 // Protocols:
 //   sequential  commit what the verifier accepts (what the product does);
@@ -38,7 +38,8 @@ int usage(int code) {
   std::fprintf(code ? stderr : stdout,
                "usage: rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]\n"
                "                    [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]\n"
-               "                    [--window_margin N] [--robust_candidate] [--quiet]\n");
+               "                    [--window_margin N] [--time_budget_ms MS] [--robust_candidate]\n"
+               "                    [--quiet]\n");
   return code;
 }
 
@@ -76,6 +77,7 @@ int main(int argc, char** argv) {
       if (!core::parseAlignment(value(), &cfg.alignment)) return usage(2);
     } else if (a == "--threshold") cfg.threshold = std::atof(value().c_str());
     else if (a == "--window_margin") cfg.window_margin = std::atoi(value().c_str());
+    else if (a == "--time_budget_ms") cfg.time_budget_ms = std::atof(value().c_str());
     else if (a == "--robust_candidate") cfg.robust_candidate = true;
     else if (a == "--quiet") quiet = true;
     else if (a == "--help" || a == "-h") return usage(0);

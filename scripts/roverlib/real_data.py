@@ -1,0 +1,135 @@
+"""Scenarios from real trajectories in ../shared/data: keyframes from a VIO/VO estimate (real
+drift), candidates from the ground truth.
+
+True candidates pair keyframes that are at the same place in truth (and face the same way)
+with their ground-truth relative pose; false ones pair keyframes that are far apart in truth
+with a plausible small relative pose (what PnP on a look-alike place returns).
+"""
+import os
+
+import numpy as np
+
+from . import geometry as g
+from .scenario import Candidate, Keyframe, Scenario
+from .scenes import perturb, small_pose
+
+DATA = os.environ.get("ROVER_SHARED_DATA",
+                      os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data"))
+
+# name -> (estimate file, ground-truth file, mode, alignment, environment)
+SEQUENCES = {
+    "euroc_mh01": ("euroc/MH_01_vio_stereo.txt", "euroc/MH_01_groundtruth.txt", "4dof", "se3", "indoor"),
+    "euroc_mh03": ("euroc/MH_03_vio_stereo.txt", "euroc/MH_03_groundtruth.txt", "4dof", "se3", "indoor"),
+    "euroc_mh05": ("euroc/MH_05_vio_stereo.txt", "euroc/MH_05_groundtruth.txt", "4dof", "se3", "indoor"),
+    "euroc_mh04_mono0": ("euroc/MH_04_vio_mono_trial0.txt", "euroc/MH_04_groundtruth.txt", "4dof", "se3", "indoor"),
+    "euroc_mh04_mono1": ("euroc/MH_04_vio_mono_trial1.txt", "euroc/MH_04_groundtruth.txt", "4dof", "se3", "indoor"),
+    "euroc_mh04_mono2": ("euroc/MH_04_vio_mono_trial2.txt", "euroc/MH_04_groundtruth.txt", "4dof", "se3", "indoor"),
+    "kitti_09": ("kitti/09_vo_estimate.txt", "kitti/09_groundtruth.txt", "6dof", "se3", "outdoor"),
+}
+
+# KITTI camera frame (x right, y down, z forward) -> z-up, x-forward frame.
+_KITTI = g.pose(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]))
+
+
+def data_path(rel):
+    p = os.path.normpath(os.path.join(DATA, rel))
+    if not os.path.exists(p):
+        raise FileNotFoundError(f"{p} not found: the real data is read from ../shared/data "
+                                f"(or set ROVER_SHARED_DATA)")
+    return p
+
+
+def load_tum(path):
+    a = np.loadtxt(path, comments="#")
+    return a[:, 0], [g.pose_from_tq(r[1:4], r[4:8]) for r in a]
+
+
+def load_kitti(path, dt=0.1):
+    a = np.loadtxt(path)
+    poses = []
+    for r in a:
+        T = g.pose(r.reshape(3, 4)[:, :3], r.reshape(3, 4)[:, 3])
+        poses.append(_KITTI @ T @ g.inv(_KITTI))
+    return np.arange(len(poses)) * dt, poses
+
+
+def associate(t_est, t_gt, tol):
+    """Index into t_gt of the nearest stamp for each t_est, -1 where none is within tol."""
+    j = np.clip(np.searchsorted(t_gt, t_est), 1, len(t_gt) - 1)
+    left = np.abs(t_gt[j - 1] - t_est) < np.abs(t_gt[j] - t_est)
+    j = np.where(left, j - 1, j)
+    return np.where(np.abs(t_gt[j] - t_est) <= tol, j, -1)
+
+
+def keyframes_by_distance(poses, min_distance, min_yaw=np.radians(15.0)):
+    """Indices of poses kept as keyframes: a new one after moving min_distance or turning
+    min_yaw (VINS selects keyframes by parallax; this is the geometric analogue)."""
+    keep = [0]
+    for i in range(1, len(poses)):
+        a, b = poses[keep[-1]], poses[i]
+        if (np.linalg.norm(b[:3, 3] - a[:3, 3]) >= min_distance or
+                abs(g.wrap(g.yaw_of(b[:3, :3]) - g.yaw_of(a[:3, :3]))) >= min_yaw):
+            keep.append(i)
+    return keep
+
+
+def make_real(name, seed=0, n_true=100, n_false=100, keyframe_distance=None, min_gap_s=None,
+              revisit_radius=None, false_distance=None):
+    est_rel, gt_rel, mode, alignment, env = SEQUENCES[name]
+    rng = np.random.default_rng(seed)
+    outdoor = env == "outdoor"
+    keyframe_distance = keyframe_distance or (1.0 if outdoor else 0.2)
+    min_gap_s = min_gap_s or (30.0 if outdoor else 10.0)
+    revisit_radius = revisit_radius or (4.0 if outdoor else 0.5)
+    false_distance = false_distance or ((10.0, 60.0) if outdoor else (3.0, 15.0))
+    if name.startswith("kitti"):
+        t_est, est = load_kitti(data_path(est_rel))
+        t_gt, gt = load_kitti(data_path(gt_rel))
+        match = np.arange(len(est))  # one pose per frame in both
+    else:
+        t_est, est = load_tum(data_path(est_rel))
+        t_gt, gt = load_tum(data_path(gt_rel))
+        match = associate(t_est, t_gt, 0.01)
+        # Before initialisation the VIO reports identity poses: skip them.
+        moving = np.array([np.linalg.norm(T[:3, 3]) > 1e-9 or abs(T[0, 0] - 1) > 1e-12 for T in est])
+        match = np.where(moving, match, -1)
+    valid = np.flatnonzero(match >= 0)
+    est_v = [est[i] for i in valid]
+    keep = [valid[k] for k in keyframes_by_distance(est_v, keyframe_distance)]
+    kfs = [Keyframe(k, float(t_est[i]), 1, est[i]) for k, i in enumerate(keep)]
+    truth = [gt[match[i]] for i in keep]
+
+    P = np.array([T[:3, 3] for T in truth])
+    Y = np.array([g.yaw_of(T[:3, :3]) for T in truth])
+    stamps = np.array([k.stamp for k in kfs])
+    true_pool, false_pool = [], []
+    for q in range(len(kfs)):
+        older = np.flatnonzero(stamps < stamps[q] - min_gap_s)
+        if older.size == 0:
+            continue
+        d = np.linalg.norm(P[older] - P[q], axis=1)
+        same_way = np.abs(g.wrap(Y[older] - Y[q])) < np.radians(30.0)
+        near = older[(d < revisit_radius) & same_way]
+        if near.size:
+            m = int(near[0])
+            true_pool.append(Candidate(q, m, perturb(g.relative(truth[m], truth[q]), rng), 1, 40, "revisit"))
+        far = older[(d > false_distance[0]) & (d < false_distance[1]) & same_way]
+        if far.size:
+            m = int(rng.choice(far))
+            false_pool.append(Candidate(q, m, small_pose(rng), 0, 40, "far_apart"))
+
+    chosen, used = [], set()
+    for pool, k in ((true_pool, n_true), (false_pool, n_false)):
+        got = 0
+        for i in rng.permutation(len(pool)):
+            if got >= k:
+                break
+            if pool[i].query not in used:
+                used.add(pool[i].query)
+                chosen.append(pool[i])
+                got += 1
+    meta = {"source": f"{est_rel} + {gt_rel}", "mode": mode, "alignment": alignment,
+            "environment": env, "seed": seed, "keyframe_distance": keyframe_distance,
+            "true_candidates": sum(c.label == 1 for c in chosen),
+            "false_candidates": sum(c.label == 0 for c in chosen)}
+    return Scenario(name, kfs, sorted(chosen, key=lambda c: c.query), truth, meta)

@@ -1,0 +1,93 @@
+"""Scenario directories (docs/scenario-format.md): keyframes, labelled candidates, truth."""
+import csv
+import os
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+import numpy as np
+
+from . import geometry as g
+
+KEYFRAMES_HEADER = "index,stamp,sequence,x,y,z,qx,qy,qz,qw"
+CANDIDATES_HEADER = "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label"
+TRUTH_HEADER = "index,x,y,z,qx,qy,qz,qw"
+
+
+@dataclass
+class Keyframe:
+    index: int
+    stamp: float
+    sequence: int
+    T: np.ndarray  # VIO pose, 4x4
+
+
+@dataclass
+class Candidate:
+    query: int
+    match: int
+    T_rel: np.ndarray  # query in match frame, 4x4
+    label: int  # 1 true, 0 false, -1 unknown
+    inliers: int = -1
+    kind: str = ""  # how it was made (revisit, lookalike, random); not written
+
+    @property
+    def relative_yaw(self):
+        return g.yaw_of(self.T_rel[:3, :3])
+
+
+@dataclass
+class Scenario:
+    name: str
+    keyframes: List[Keyframe]
+    candidates: List[Candidate]
+    truth: Optional[List[np.ndarray]] = None  # per keyframe, same order
+    meta: dict = field(default_factory=dict)  # mode, alignment, threshold hints, provenance
+
+
+def _tq(T):
+    return list(T[:3, 3]) + list(g.matrix_to_quat(T[:3, :3]))
+
+
+def write(s: Scenario, directory: str):
+    os.makedirs(directory, exist_ok=True)
+    with open(os.path.join(directory, "keyframes.csv"), "w") as f:
+        f.write(f"# scenario {s.name}\n" + "".join(f"# {k}: {v}\n" for k, v in sorted(s.meta.items())))
+        f.write(KEYFRAMES_HEADER + "\n")
+        for k in s.keyframes:
+            f.write(",".join([str(k.index), f"{k.stamp:.9f}", str(k.sequence)] +
+                             [f"{v:.9f}" for v in _tq(k.T)]) + "\n")
+    with open(os.path.join(directory, "candidates.csv"), "w") as f:
+        f.write(CANDIDATES_HEADER + "\n")
+        for c in sorted(s.candidates, key=lambda c: c.query):
+            f.write(",".join([str(c.query), str(c.match)] + [f"{v:.9f}" for v in _tq(c.T_rel)] +
+                             [f"{c.relative_yaw:.9f}", str(c.inliers), str(c.label)]) + "\n")
+    if s.truth is not None:
+        with open(os.path.join(directory, "groundtruth.csv"), "w") as f:
+            f.write(TRUTH_HEADER + "\n")
+            for k, T in zip(s.keyframes, s.truth):
+                f.write(",".join([str(k.index)] + [f"{v:.9f}" for v in _tq(T)]) + "\n")
+
+
+def _rows(path, header):
+    with open(path) as f:
+        lines = [l for l in f if l.strip() and not l.lstrip().startswith("#")]
+    if not lines or lines[0].strip() != header:
+        raise ValueError(f"{path}: expected the header '{header}'")
+    return list(csv.reader(lines[1:]))
+
+
+def read(directory: str) -> Scenario:
+    kfs = [Keyframe(int(r[0]), float(r[1]), int(r[2]),
+                    g.pose_from_tq([float(v) for v in r[3:6]], [float(v) for v in r[6:10]]))
+           for r in _rows(os.path.join(directory, "keyframes.csv"), KEYFRAMES_HEADER)]
+    cands = [Candidate(int(r[0]), int(r[1]),
+                       g.pose_from_tq([float(v) for v in r[2:5]], [float(v) for v in r[5:9]]),
+                       int(r[11]), int(r[10]))
+             for r in _rows(os.path.join(directory, "candidates.csv"), CANDIDATES_HEADER)]
+    truth = None
+    gt_path = os.path.join(directory, "groundtruth.csv")
+    if os.path.exists(gt_path):
+        by_index = {int(r[0]): g.pose_from_tq([float(v) for v in r[1:4]], [float(v) for v in r[4:8]])
+                    for r in _rows(gt_path, TRUTH_HEADER)}
+        truth = [by_index.get(k.index) for k in kfs]
+    return Scenario(os.path.basename(os.path.normpath(directory)), kfs, cands, truth)
