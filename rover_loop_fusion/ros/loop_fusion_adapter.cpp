@@ -1,6 +1,7 @@
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
 
 #include "rover_loop_fusion/ros/loop_verifier.h"
+#include "rover_loop_fusion/ros/params.h"
 #include "rover_loop_fusion/ros/verdict_output.h"
 
 #include <Eigen/Geometry>
@@ -9,7 +10,6 @@
 #include <ros/init.h>
 #include <ros/names.h>
 #include <ros/this_node.h>
-#include <xmlrpcpp/XmlRpcValue.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -34,31 +34,6 @@ struct AdapterParams {
   std::string verdict_log;
   std::string marker_frame = "world";
   bool publish_markers = true;
-};
-
-/// Reads ~key if present; a value of the wrong type is an error that names the parameter.
-class ParamReader {
- public:
-  ParamReader(const ros::NodeHandle& nh, std::vector<std::string>* errors) : nh_(nh), errors_(errors) {}
-  void text(const std::string& key, std::string* value) {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(key, v)) return;
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeString) *value = static_cast<std::string>(v);
-    else error(key, "must be a string");
-  }
-  void boolean(const std::string& key, bool* value) {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(key, v)) return;
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeBoolean) *value = static_cast<bool>(v);
-    else error(key, "must be true or false");
-  }
-  void error(const std::string& key, const std::string& what) {
-    errors_->push_back("parameter " + nh_.resolveName(key) + " " + what);
-  }
-
- private:
-  const ros::NodeHandle& nh_;
-  std::vector<std::string>* errors_;
 };
 
 std::string join(const std::vector<std::string>& parts, const char* sep) {
