@@ -52,9 +52,10 @@ core::Verdict rejection(const core::LoopCandidate& c, const std::string& detail)
   return v;
 }
 
-/// Ends the host process after a configuration error: ROS_FATAL has said which parameter
-/// to fix. _Exit skips static destructors, which in loop_fusion would run into threads that
-/// are still joinable (std::terminate) or already running.
+/// Ends the host process after a configuration error (ROS_FATAL has said which parameter to
+/// fix). Not exit(): loop_fusion's static destructors would run (~PoseGraph detaches a thread
+/// that setIMUFlag has not started yet, which throws); not ros::shutdown(): loop_fusion's
+/// main would go on and return with joinable threads (std::terminate). See design notes.
 [[noreturn]] void stopProcess() {
   std::fflush(stdout);
   std::fflush(stderr);
@@ -85,9 +86,11 @@ struct LoopFusionAdapter::Impl {
   std::unordered_map<int64_t, KeyframeInfo> keyframes;
   size_t verdicts = 0;
 
+  /// start() that never throws: an exception leaves the adapter failed (loops rejected).
+  bool safeStart(bool use_imu, VerifierPtr injected, const std::string& injected_type);
   bool start(bool use_imu, VerifierPtr injected, const std::string& injected_type);
   [[noreturn]] void fatal(const std::string& message);
-  bool loadPlugin(std::string* error);
+  void loadPlugin(std::string* error);
   void publish(const core::Verdict& v, const core::LoopCandidate& c, const std::string& type);
   bool findPosition(const std::vector<core::TrajectoryPoint>& trajectory, int64_t index,
                     Eigen::Vector3d* position) const;
@@ -101,7 +104,7 @@ void LoopFusionAdapter::Impl::fatal(const std::string& message) {
   stopProcess();
 }
 
-bool LoopFusionAdapter::Impl::loadPlugin(std::string* error) {
+void LoopFusionAdapter::Impl::loadPlugin(std::string* error) {
   const std::string type_param = nh->resolveName("verifier_type");
   try {
     loader.reset(new pluginlib::ClassLoader<LoopVerifier>("rover_loop_fusion",
@@ -111,21 +114,17 @@ bool LoopFusionAdapter::Impl::loadPlugin(std::string* error) {
       std::sort(known.begin(), known.end());
       *error = "parameter " + type_param + ": unknown verifier type '" + verifier_type +
                "' (available: " + join(known, ", ") + ")";
-      return false;
+      return;
     }
     verifier = loader->createUniqueInstance(verifier_type);
-    if (!verifier) {
-      *error = "parameter " + type_param + ": pluginlib returned no instance of '" + verifier_type + "'";
-      return false;
-    }
-    return true;
+    if (!verifier) *error = "parameter " + type_param + ": pluginlib returned no instance of '" + verifier_type + "'";
+    return;
   } catch (const std::exception& e) {
     *error = "parameter " + type_param + ": cannot load verifier plugin '" + verifier_type + "': " + e.what();
   } catch (...) {
     *error = "parameter " + type_param + ": cannot load verifier plugin '" + verifier_type + "'";
   }
   verifier.reset();
-  return false;
 }
 
 bool LoopFusionAdapter::Impl::start(bool use_imu, VerifierPtr injected, const std::string& injected_type) {
@@ -254,34 +253,26 @@ LoopFusionAdapter::LoopFusionAdapter() : impl_(new Impl) {}
 
 LoopFusionAdapter::~LoopFusionAdapter() = default;
 
-bool LoopFusionAdapter::initialize(bool use_imu) {
+bool LoopFusionAdapter::Impl::safeStart(bool use_imu, VerifierPtr injected, const std::string& injected_type) {
   try {
-    return impl_->start(use_imu, Impl::VerifierPtr(), "");
+    return start(use_imu, std::move(injected), injected_type);
   } catch (const std::exception& e) {
     ROS_ERROR("[rover] LoopFusionAdapter::initialize: %s; every loop is rejected", e.what());
   } catch (...) {
     ROS_ERROR("[rover] LoopFusionAdapter::initialize: unknown exception; every loop is rejected");
   }
-  std::lock_guard<std::mutex> lock(impl_->mutex);
-  impl_->mode = Impl::Mode::kFailed;
-  impl_->failure = "initialize() failed with an exception";
+  std::lock_guard<std::mutex> lock(mutex);
+  mode = Mode::kFailed;
+  failure = "initialize() failed with an exception";
   return false;
 }
 
+bool LoopFusionAdapter::initialize(bool use_imu) { return impl_->safeStart(use_imu, Impl::VerifierPtr(), ""); }
+
 bool LoopFusionAdapter::initializeWithVerifier(bool use_imu, std::unique_ptr<LoopVerifier> verifier,
                                                const std::string& verifier_type) {
-  try {
-    Impl::VerifierPtr p(verifier.release(), [](LoopVerifier* v) { delete v; });
-    return impl_->start(use_imu, std::move(p), verifier_type);
-  } catch (const std::exception& e) {
-    ROS_ERROR("[rover] LoopFusionAdapter::initialize: %s; every loop is rejected", e.what());
-  } catch (...) {
-    ROS_ERROR("[rover] LoopFusionAdapter::initialize: unknown exception; every loop is rejected");
-  }
-  std::lock_guard<std::mutex> lock(impl_->mutex);
-  impl_->mode = Impl::Mode::kFailed;
-  impl_->failure = "initialize() failed with an exception";
-  return false;
+  return impl_->safeStart(use_imu, Impl::VerifierPtr(verifier.release(), std::default_delete<LoopVerifier>()),
+                          verifier_type);
 }
 
 void LoopFusionAdapter::addKeyframe(int index, double stamp, int sequence, const Eigen::Vector3d& P,
