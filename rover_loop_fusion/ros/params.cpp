@@ -9,50 +9,45 @@
 
 namespace rover_loop_fusion {
 
-namespace {
+ParamReader::ParamReader(const ros::NodeHandle& nh, std::vector<std::string>* errors)
+    : nh_(nh), errors_(errors) {}
 
-class Reader {
- public:
-  Reader(const ros::NodeHandle& nh, ConfigLoad* out) : nh_(nh), out_(out) {}
+void ParamReader::number(const std::string& key, double* value) {
+  XmlRpc::XmlRpcValue v;
+  if (!nh_.getParam(key, v)) return;
+  if (v.getType() == XmlRpc::XmlRpcValue::TypeDouble) *value = static_cast<double>(v);
+  else if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) *value = static_cast<int>(v);
+  else wrongType(key, "a number");
+}
 
-  void number(const std::string& key, double* value) {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(key, v)) return;
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeDouble) *value = static_cast<double>(v);
-    else if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) *value = static_cast<int>(v);
-    else wrongType(key, "a number");
-  }
-  void integer(const std::string& key, int* value) {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(key, v)) return;
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) *value = static_cast<int>(v);
-    else wrongType(key, "an integer");
-  }
-  void boolean(const std::string& key, bool* value) {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(key, v)) return;
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeBoolean) *value = static_cast<bool>(v);
-    else wrongType(key, "true or false");
-  }
-  void text(const std::string& key, std::string* value) {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(key, v)) return;
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeString) *value = static_cast<std::string>(v);
-    else wrongType(key, "a string");
-  }
-  void error(const std::string& key, const std::string& what) {
-    out_->errors.push_back("parameter " + nh_.resolveName(key) + " " + what);
-  }
+void ParamReader::integer(const std::string& key, int* value) {
+  XmlRpc::XmlRpcValue v;
+  if (!nh_.getParam(key, v)) return;
+  if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) *value = static_cast<int>(v);
+  else wrongType(key, "an integer");
+}
 
- private:
-  void wrongType(const std::string& key, const char* expected) {
-    error(key, std::string("must be ") + expected);
-  }
-  const ros::NodeHandle& nh_;
-  ConfigLoad* out_;
-};
+void ParamReader::boolean(const std::string& key, bool* value) {
+  XmlRpc::XmlRpcValue v;
+  if (!nh_.getParam(key, v)) return;
+  if (v.getType() == XmlRpc::XmlRpcValue::TypeBoolean) *value = static_cast<bool>(v);
+  else wrongType(key, "true or false");
+}
 
-}  // namespace
+void ParamReader::text(const std::string& key, std::string* value) {
+  XmlRpc::XmlRpcValue v;
+  if (!nh_.getParam(key, v)) return;
+  if (v.getType() == XmlRpc::XmlRpcValue::TypeString) *value = static_cast<std::string>(v);
+  else wrongType(key, "a string");
+}
+
+void ParamReader::error(const std::string& key, const std::string& what) {
+  errors_->push_back("parameter " + nh_.resolveName(key) + " " + what);
+}
+
+void ParamReader::wrongType(const std::string& key, const char* expected) {
+  error(key, std::string("must be ") + expected);
+}
 
 const std::vector<std::string>& verifierParameterNames() {
   static const std::vector<std::string> names = {
@@ -66,7 +61,7 @@ const std::vector<std::string>& verifierParameterNames() {
 ConfigLoad loadVerifierConfig(const ros::NodeHandle& nh, bool host_uses_imu) {
   ConfigLoad out;
   core::VerifierConfig& c = out.config;
-  Reader r(nh, &out);
+  ParamReader r(nh, &out.errors);
 
   std::string mode = "auto";
   r.text("mode", &mode);

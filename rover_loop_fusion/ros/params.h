@@ -17,6 +17,24 @@ struct ConfigLoad {
   bool ok() const { return errors.empty(); }
 };
 
+/// Reads typed parameters of one namespace: a present key of the wrong type is an error
+/// ("parameter /full/name must be ...") appended to `errors`; an absent key leaves the value.
+class ParamReader {
+ public:
+  ParamReader(const ros::NodeHandle& nh, std::vector<std::string>* errors);
+  void number(const std::string& key, double* value);  ///< int or double
+  void integer(const std::string& key, int* value);
+  void boolean(const std::string& key, bool* value);
+  void text(const std::string& key, std::string* value);
+  /// Records an error about `key` (full parameter name + `what`).
+  void error(const std::string& key, const std::string& what);
+
+ private:
+  void wrongType(const std::string& key, const char* expected);
+  const ros::NodeHandle& nh_;
+  std::vector<std::string>* errors_;
+};
+
 /// Reads every verifier parameter from `nh`'s namespace (see config/rover_indoor.yaml for the
 /// list), falling back to the defaults for absent keys. A key with the wrong type or an
 /// invalid value is an error that names the full parameter. `mode: auto` (the default)

@@ -1,0 +1,83 @@
+// The entry point of the patched VINS-Fusion loop_fusion (patches/): the patch calls these
+// few methods with plain values; everything else (parameters, the pluginlib verifier,
+// verdict topic, markers, CSV log) lives behind them in our package.
+//
+// This header is included by loop_fusion's pose_graph.h and must compile with loop_fusion's
+// own flags (-std=c++11) and include paths: it includes only the standard library and Eigen,
+// never ROS, pluginlib or Ceres headers (checked at build time, see CMakeLists.txt).
+//
+// Host safety: no method throws. Errors are logged with ROS_ERROR and fail closed (the loop
+// is rejected). A verifier that cannot be set up from the parameters either falls back to
+// accepting every loop (only if ~fallback_to_accept_all is true) or stops the process with a
+// ROS_FATAL message that names the parameter to fix.
+#ifndef ROVER_LOOP_FUSION_ROS_LOOP_FUSION_ADAPTER_H
+#define ROVER_LOOP_FUSION_ROS_LOOP_FUSION_ADAPTER_H
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+
+namespace rover_loop_fusion {
+
+class LoopVerifier;
+
+class LoopFusionAdapter {
+ public:
+  /// loop_info layout of loop_fusion's keyframes:
+  /// [t_x, t_y, t_z, q_w, q_x, q_y, q_z, relative_yaw_degrees], the query keyframe in the
+  /// match keyframe's frame.
+  typedef Eigen::Matrix<double, 8, 1> LoopInfo;
+
+  /// Does not touch ROS (loop_fusion's PoseGraph is a global object built before ros::init).
+  LoopFusionAdapter();
+  ~LoopFusionAdapter();
+  LoopFusionAdapter(const LoopFusionAdapter&) = delete;
+  LoopFusionAdapter& operator=(const LoopFusionAdapter&) = delete;
+
+  /// Reads the parameters from the node's private namespace (~verifier_type, ~verifier_name,
+  /// ~fallback_to_accept_all, ~verdict_log, ~marker_frame, ~publish_markers and the plugin's
+  /// ~<verifier_name>/...), loads the verifier plugin and advertises ~loop_verdicts and
+  /// ~loop_markers. Call once, after ros::init (loop_fusion: in setIMUFlag).
+  /// use_imu: loop_fusion's 4-DoF (true) or 6-DoF (false) pose graph.
+  /// Returns true when the configured verifier runs, false in fallback mode (every loop
+  /// accepted). If the verifier cannot start and the fallback is off, the process stops
+  /// (ROS_FATAL naming the parameter, exit status 1). A second call does nothing and returns
+  /// the first result.
+  bool initialize(bool use_imu);
+
+  /// As initialize(), with a verifier built by the caller instead of the one named by
+  /// ~verifier_type (embedding without pluginlib, tests). `verifier_type` is reported in
+  /// verdicts. The verifier's own initialize() is called here.
+  bool initializeWithVerifier(bool use_imu, std::unique_ptr<LoopVerifier> verifier,
+                              const std::string& verifier_type);
+
+  /// Registers a keyframe: loop_fusion's global index, stamp [s], sequence and VIO pose
+  /// (after loop_fusion's own sequence shift w_r_vio / w_t_vio). Call before verifyLoop()
+  /// for that keyframe.
+  void addKeyframe(int index, double stamp, int sequence, const Eigen::Vector3d& P,
+                   const Eigen::Matrix3d& R);
+
+  /// Verifies a loop candidate that passed findConnection; commits it when accepted and
+  /// publishes the verdict. Returns true iff loop_fusion may use the loop; false: set
+  /// has_loop = false and skip it. inliers: the PnP inlier count, -1 if unknown.
+  bool verifyLoop(int query_index, int match_index, const LoopInfo& loop_info, int inliers = -1);
+
+  /// Adds a loop stored in a loaded pose graph (loadPoseGraph) without verifying it: both
+  /// keyframes belong to the loaded map, which loop_fusion holds fixed. Not published.
+  /// Returns false if the verifier refused it (logged).
+  bool commitStoredLoop(int query_index, int match_index, const LoopInfo& loop_info);
+
+  /// true after initialize() set up the configured verifier (not the fallback).
+  bool verifying() const;
+  /// Verdicts published so far.
+  size_t verdictCount() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace rover_loop_fusion
+
+#endif  // ROVER_LOOP_FUSION_ROS_LOOP_FUSION_ADAPTER_H

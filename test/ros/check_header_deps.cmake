@@ -1,0 +1,35 @@
+# cmake -DCXX=<compiler> -DROOT=<repo root> -DEIGEN=<Eigen include dir> -DSRC=<tu> -P check_header_deps.cmake
+# Compiles SRC with -std=c++11 (loop_fusion's flag) and fails if it includes anything besides
+# the standard library, Eigen and loop_fusion_adapter.h itself (ROS, pluginlib, Ceres, Boost or
+# our core headers would leak loop_fusion-incompatible flags and dependencies into the patch).
+set(flags -std=c++11 -I${ROOT} -isystem ${EIGEN})
+execute_process(COMMAND ${CXX} ${flags} -Wall -Wextra -Werror -fsyntax-only ${SRC}
+  RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "loop_fusion_adapter.h does not compile with -std=c++11:\n${err}")
+endif()
+execute_process(COMMAND ${CXX} ${flags} -M ${SRC} OUTPUT_VARIABLE deps RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "listing the includes of ${SRC} failed:\n${err}")
+endif()
+string(REPLACE "\\\n" " " deps "${deps}")
+string(REGEX REPLACE "^[^:]*:" "" deps "${deps}")
+separate_arguments(deps UNIX_COMMAND "${deps}")
+get_filename_component(eigen_dir "${EIGEN}" REALPATH)
+get_filename_component(root_dir "${ROOT}" REALPATH)
+get_filename_component(src_file "${SRC}" REALPATH)
+set(bad "")
+foreach(d ${deps})
+  get_filename_component(d "${d}" REALPATH)
+  if(d STREQUAL src_file OR d STREQUAL "${root_dir}/rover_loop_fusion/ros/loop_fusion_adapter.h")
+  elseif(d MATCHES "^${eigen_dir}/")
+  elseif(d MATCHES "^/usr/include/c\\+\\+/" OR d MATCHES "^/usr/lib/gcc/" OR d MATCHES "^/usr/include/[^/]+-linux-gnu[^/]*/"
+         OR d MATCHES "^/usr/include/[^/]+\\.h$" OR d MATCHES "^/usr/include/(bits|sys|gnu|linux|asm|asm-generic)/")
+  else()
+    list(APPEND bad "${d}")
+  endif()
+endforeach()
+if(bad)
+  string(REPLACE ";" "\n  " bad "${bad}")
+  message(FATAL_ERROR "loop_fusion_adapter.h must include only the standard library and Eigen; it pulls in:\n  ${bad}")
+endif()

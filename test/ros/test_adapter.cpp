@@ -1,0 +1,805 @@
+// The loop_fusion adapter, driven the way the patched VINS-Fusion loop_fusion drives it
+// (patches/vins_fusion_loop_fusion.patch), without VINS-Fusion. Runs under rostest
+// (test/ros/adapter.test) as the node `loop_fusion`, so ~ is /loop_fusion as in
+// launch/vins_rover.launch, which adapter.test mirrors by loading config/rover_indoor.yaml
+// into /loop_fusion/rover.
+//
+// FakePoseGraph below is PoseGraph::addKeyFrame / loadKeyFrame / setIMUFlag of loop_fusion
+// reduced to the state the patch touches (has_loop, earliest_loop_index, the sequence shift
+// w_r_vio / w_t_vio, optimize_buf), with the adapter calls exactly where the patch makes them.
+#include "rover_loop_fusion/LoopVerdict.h"
+#include "rover_loop_fusion/core/verdict_csv.h"
+#include "rover_loop_fusion/ros/loop_fusion_adapter.h"
+#include "rover_loop_fusion/ros/loop_verifier.h"
+#include "rover_loop_fusion/ros/params.h"
+#include "rover_loop_fusion/sim/scene.h"
+
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using namespace rover_loop_fusion;
+using LoopInfo = LoopFusionAdapter::LoopInfo;
+using visualization_msgs::Marker;
+using visualization_msgs::MarkerArray;
+
+namespace {
+
+const char kRover[] = "rover_loop_fusion/TrajectoryPriorVerifier";
+const char kAcceptAll[] = "rover_loop_fusion/AcceptAllVerifier";
+
+// ---- loop_fusion, reduced ------------------------------------------------------------------
+
+/// The fields of loop_fusion's KeyFrame that the patch reads or writes.
+struct FakeKeyFrame {
+  int index = -1;
+  double time_stamp = 0.0;
+  int sequence = 1;
+  Eigen::Vector3d vio_T_w_i = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d vio_R_w_i = Eigen::Matrix3d::Identity();
+  bool has_loop = false;
+  int loop_index = -1;
+  LoopInfo loop_info = LoopInfo::Zero();
+};
+
+/// Utility::R2ypr(R).x() of loop_fusion: yaw in degrees.
+double yawDeg(const Eigen::Matrix3d& R) { return std::atan2(R(1, 0), R(0, 0)) * 180.0 / M_PI; }
+
+/// Utility::ypr2R(Vector3d(yaw, 0, 0)).
+Eigen::Matrix3d yawR(double yaw_deg) {
+  return Eigen::AngleAxisd(yaw_deg * M_PI / 180.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+}
+
+/// What findConnection found: the old keyframe and loop_info.
+struct Detection {
+  int loop_index;
+  LoopInfo loop_info;
+};
+
+class FakePoseGraph {
+ public:
+  rover_loop_fusion::LoopFusionAdapter rover;  // the patch's member
+  bool use_imu = false;
+  int global_index = 0;
+  int sequence_cnt = 0;
+  std::vector<int> sequence_loop{0};
+  int earliest_loop_index = -1;
+  Eigen::Vector3d w_t_vio = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d w_r_vio = Eigen::Matrix3d::Identity();
+  std::vector<int> optimize_buf;
+  std::map<int, FakeKeyFrame> keyframelist;
+
+  /// Patch: setIMUFlag calls rover.initialize(use_imu).
+  bool setIMUFlag(bool _use_imu) {
+    use_imu = _use_imu;
+    return rover.initialize(use_imu);
+  }
+
+  /// PoseGraph::addKeyFrame with flag_detect_loop; `detection` stands for detectLoop +
+  /// a successful findConnection (nullptr: no loop detected). Returns the keyframe as stored.
+  const FakeKeyFrame& addKeyFrame(FakeKeyFrame cur_kf, const Detection* detection) {
+    if (sequence_cnt != cur_kf.sequence) {
+      sequence_cnt++;
+      sequence_loop.push_back(0);
+      w_t_vio = Eigen::Vector3d::Zero();
+      w_r_vio = Eigen::Matrix3d::Identity();
+    }
+    Eigen::Vector3d vio_P_cur = w_r_vio * cur_kf.vio_T_w_i + w_t_vio;
+    Eigen::Matrix3d vio_R_cur = w_r_vio * cur_kf.vio_R_w_i;
+    cur_kf.vio_T_w_i = vio_P_cur;
+    cur_kf.vio_R_w_i = vio_R_cur;
+    cur_kf.index = global_index;
+    global_index++;
+    // patch: register the keyframe
+    rover.addKeyframe(cur_kf.index, cur_kf.time_stamp, cur_kf.sequence, vio_P_cur, vio_R_cur);
+    int loop_index = detection ? detection->loop_index : -1;
+    if (loop_index != -1) {
+      const FakeKeyFrame& old_kf = keyframelist.at(loop_index);
+      // findConnection(old_kf) succeeded: it sets has_loop, loop_index, loop_info
+      cur_kf.has_loop = true;
+      cur_kf.loop_index = old_kf.index;
+      cur_kf.loop_info = detection->loop_info;
+      // patch: the hook after findConnection
+      bool use_loop = true;
+      if (use_loop && !rover.verifyLoop(cur_kf.index, old_kf.index, cur_kf.loop_info))
+        use_loop = cur_kf.has_loop = false;
+      if (use_loop) {
+        if (earliest_loop_index > loop_index || earliest_loop_index == -1) earliest_loop_index = loop_index;
+        const Eigen::Vector3d w_P_old = old_kf.vio_T_w_i;
+        const Eigen::Matrix3d w_R_old = old_kf.vio_R_w_i;
+        const Eigen::Vector3d relative_t = cur_kf.loop_info.head<3>();
+        const Eigen::Matrix3d relative_q =
+            Eigen::Quaterniond(cur_kf.loop_info(3), cur_kf.loop_info(4), cur_kf.loop_info(5), cur_kf.loop_info(6))
+                .toRotationMatrix();
+        const Eigen::Vector3d w_P_cur = w_R_old * relative_t + w_P_old;
+        const Eigen::Matrix3d w_R_cur = w_R_old * relative_q;
+        Eigen::Matrix3d shift_r;
+        if (use_imu) shift_r = yawR(yawDeg(w_R_cur) - yawDeg(vio_R_cur));
+        else shift_r = w_R_cur * vio_R_cur.transpose();
+        const Eigen::Vector3d shift_t = w_P_cur - w_R_cur * vio_R_cur.transpose() * vio_P_cur;
+        if (old_kf.sequence != cur_kf.sequence && sequence_loop[cur_kf.sequence] == 0) {
+          w_r_vio = shift_r;
+          w_t_vio = shift_t;
+          cur_kf.vio_T_w_i = w_r_vio * vio_P_cur + w_t_vio;
+          cur_kf.vio_R_w_i = w_r_vio * vio_R_cur;
+          for (auto& kf : keyframelist) {
+            if (kf.second.sequence != cur_kf.sequence) continue;
+            kf.second.vio_T_w_i = w_r_vio * kf.second.vio_T_w_i + w_t_vio;
+            kf.second.vio_R_w_i = w_r_vio * kf.second.vio_R_w_i;
+          }
+          sequence_loop[cur_kf.sequence] = 1;
+        }
+        optimize_buf.push_back(cur_kf.index);
+      }
+    }
+    return keyframelist[cur_kf.index] = cur_kf;
+  }
+
+  /// PoseGraph::loadKeyFrame as loadPoseGraph calls it (flag_detect_loop = 0): keyframes of
+  /// a saved graph, sequence 0, with their stored loops. Returns what commitStoredLoop said
+  /// (the patch ignores it).
+  bool loadKeyFrame(FakeKeyFrame cur_kf) {
+    cur_kf.index = global_index;
+    global_index++;
+    cur_kf.sequence = 0;
+    // patch: register the keyframe, commit its stored loop
+    rover.addKeyframe(cur_kf.index, cur_kf.time_stamp, cur_kf.sequence, cur_kf.vio_T_w_i, cur_kf.vio_R_w_i);
+    bool committed = true;
+    if (cur_kf.has_loop) committed = rover.commitStoredLoop(cur_kf.index, cur_kf.loop_index, cur_kf.loop_info);
+    if (cur_kf.loop_index != -1)
+      if (earliest_loop_index > cur_kf.loop_index || earliest_loop_index == -1) earliest_loop_index = cur_kf.loop_index;
+    keyframelist[cur_kf.index] = cur_kf;
+    return committed;
+  }
+};
+
+// ---- simulated input -----------------------------------------------------------------------
+
+sim::Scene corridor(int laps) {
+  sim::LapsOptions o;
+  o.laps = laps;
+  o.seed = 7;
+  o.sigma_yaw = 0.004;
+  return sim::makeLapsScene(o);
+}
+
+/// loop_fusion's loop_info layout, yaw in degrees.
+LoopInfo loopInfo(const core::LoopCandidate& c) {
+  LoopInfo info;
+  info << c.relative_t.x(), c.relative_t.y(), c.relative_t.z(), c.relative_q.w(), c.relative_q.x(),
+      c.relative_q.y(), c.relative_q.z(), c.relative_yaw * 180.0 / M_PI;
+  return info;
+}
+
+FakeKeyFrame keyframe(const sim::SimKeyframe& s, int sequence, const core::Pose& frame = core::Pose()) {
+  FakeKeyFrame kf;
+  kf.time_stamp = s.stamp;
+  kf.sequence = sequence;
+  const core::Pose p = sim::compose(frame, s.vio);  // the pose in that session's VIO frame
+  kf.vio_T_w_i = p.t;
+  kf.vio_R_w_i = p.q.toRotationMatrix();
+  return kf;
+}
+
+/// Candidates by query keyframe index.
+std::map<int64_t, const sim::SimCandidate*> byQuery(const sim::Scene& s) {
+  std::map<int64_t, const sim::SimCandidate*> m;
+  for (const sim::SimCandidate& c : s.candidates) m.emplace(c.candidate.query_index, &c);
+  return m;
+}
+
+/// The first false candidate and the first true one after it.
+std::vector<const sim::SimCandidate*> falseThenTrue(const sim::Scene& s) {
+  const sim::SimCandidate* f = nullptr;
+  const sim::SimCandidate* t = nullptr;
+  for (const sim::SimCandidate& c : s.candidates) {
+    if (!f && !c.is_true) f = &c;
+    else if (f && !t && c.is_true && c.candidate.query_index > f->candidate.query_index) t = &c;
+  }
+  return {f, t};
+}
+
+// ---- ROS plumbing --------------------------------------------------------------------------
+
+/// Subscribes to ~loop_verdicts and ~loop_markers of this node (where the adapter publishes).
+class Listener {
+ public:
+  Listener() : nh_("~") {
+    verdict_sub_ = nh_.subscribe("loop_verdicts", 1000, &Listener::onVerdict, this);
+    marker_sub_ = nh_.subscribe("loop_markers", 1000, &Listener::onMarkers, this);
+  }
+  /// Waits (bounded, no timing is asserted) until the adapter's publishers are connected.
+  bool connect(bool markers = true) {
+    return spinUntil([&] {
+      return verdict_sub_.getNumPublishers() > 0 && (!markers || marker_sub_.getNumPublishers() > 0);
+    });
+  }
+  bool waitFor(size_t verdicts, size_t markers) {
+    return spinUntil([&] { return verdicts_.size() >= verdicts && markers_.size() >= markers; });
+  }
+  size_t markerPublishers() const { return marker_sub_.getNumPublishers(); }
+  std::vector<LoopVerdict> verdicts_;
+  std::vector<MarkerArray> markers_;
+
+ private:
+  template <typename F>
+  static bool spinUntil(F done) {
+    const ros::WallTime give_up = ros::WallTime::now() + ros::WallDuration(60.0);
+    while (!done()) {
+      if (ros::WallTime::now() > give_up || !ros::ok()) return false;
+      ros::spinOnce();
+      ros::WallDuration(0.005).sleep();
+    }
+    ros::spinOnce();
+    return true;
+  }
+  void onVerdict(const LoopVerdict& m) { verdicts_.push_back(m); }
+  void onMarkers(const MarkerArray& m) { markers_.push_back(m); }
+  ros::NodeHandle nh_;
+  ros::Subscriber verdict_sub_, marker_sub_;
+};
+
+const char* const kAdapterParams[] = {"verifier_type", "verifier_name", "fallback_to_accept_all",
+                                      "verdict_log", "marker_frame", "publish_markers"};
+
+class Adapter : public ::testing::Test {
+ protected:
+  void SetUp() override { clear(); }
+  void TearDown() override { clear(); }
+  static void clear() {
+    for (const char* p : kAdapterParams) ros::param::del(std::string("~") + p);
+  }
+};
+
+std::string tempFile(const std::string& name) {
+  const std::string path = "/tmp/rover_test_adapter_" + std::to_string(::getpid()) + "_" + name;
+  std::remove(path.c_str());
+  return path;
+}
+
+std::vector<std::string> readLines(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  std::string line;
+  while (std::getline(in, line)) lines.push_back(line);
+  return lines;
+}
+
+bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
+
+}  // namespace
+
+// ---- the trajectory-prior verifier (the default plugin) ------------------------------------
+
+TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
+  const std::string log = tempFile("verdicts.csv");
+  ros::param::set("~verdict_log", log);
+  const sim::Scene s = corridor(2);
+  const std::vector<const sim::SimCandidate*> picks = falseThenTrue(s);
+  ASSERT_TRUE(picks[0] && picks[1]);
+
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  EXPECT_TRUE(pg.rover.verifying());
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+
+  std::vector<FakeKeyFrame> looped;
+  for (const sim::SimKeyframe& k : s.keyframes) {
+    std::unique_ptr<Detection> d;
+    for (const sim::SimCandidate* c : picks)
+      if (c->candidate.query_index == k.index) d.reset(new Detection{static_cast<int>(c->candidate.match_index), loopInfo(c->candidate)});
+    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(k, 1), d.get());
+    if (d) {
+      looped.push_back(kf);
+      if (looped.size() == 1) {
+        // The false loop is rejected and touches nothing loop_fusion would act on.
+        EXPECT_FALSE(kf.has_loop);
+        EXPECT_EQ(pg.earliest_loop_index, -1);
+        EXPECT_TRUE(pg.optimize_buf.empty());
+      }
+    }
+    if (looped.size() == 2) break;
+  }
+  ASSERT_EQ(looped.size(), 2u);
+  EXPECT_FALSE(looped[0].has_loop);
+  EXPECT_TRUE(looped[1].has_loop);
+  EXPECT_EQ(pg.earliest_loop_index, picks[1]->candidate.match_index);
+  EXPECT_EQ(pg.optimize_buf, std::vector<int>{looped[1].index});
+  EXPECT_EQ(pg.rover.verdictCount(), 2u);
+
+  // ~loop_verdicts
+  ASSERT_TRUE(listen.waitFor(2, 2));
+  ASSERT_EQ(listen.verdicts_.size(), 2u);
+  const LoopVerdict& rejected = listen.verdicts_[0];
+  const LoopVerdict& accepted = listen.verdicts_[1];
+  EXPECT_EQ(rejected.query_index, picks[0]->candidate.query_index);
+  EXPECT_EQ(rejected.match_index, picks[0]->candidate.match_index);
+  EXPECT_FALSE(rejected.accepted);
+  EXPECT_EQ(rejected.reason, LoopVerdict::SCORE_ABOVE_THRESHOLD) << rejected.detail;
+  EXPECT_GT(rejected.score, 0.5);
+  EXPECT_DOUBLE_EQ(rejected.threshold, 0.5);  // config/rover_indoor.yaml
+  EXPECT_TRUE(rejected.converged);
+  EXPECT_EQ(rejected.verifier, kRover);
+  EXPECT_EQ(rejected.inliers, -1);  // loop_fusion does not hand the PnP inlier count out
+  EXPECT_EQ(rejected.header.frame_id, "world");
+  EXPECT_NEAR(rejected.query_stamp.toSec(), s.keyframes[rejected.query_index].stamp, 1e-6);
+  EXPECT_NEAR(rejected.match_stamp.toSec(), s.keyframes[rejected.match_index].stamp, 1e-6);
+  EXPECT_EQ(accepted.query_index, looped[1].index);
+  EXPECT_TRUE(accepted.accepted);
+  EXPECT_EQ(accepted.reason, LoopVerdict::ACCEPTED);
+  EXPECT_LE(accepted.score, 0.5);
+  EXPECT_GT(accepted.window_size, 50);
+
+  // ~loop_markers: a red line + score text for the rejected loop, green for the accepted one.
+  ASSERT_EQ(listen.markers_.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    const MarkerArray& arr = listen.markers_[i];
+    ASSERT_EQ(arr.markers.size(), 2u);
+    const Marker& line = arr.markers[0];
+    const Marker& text = arr.markers[1];
+    EXPECT_EQ(line.type, Marker::LINE_LIST);
+    EXPECT_EQ(line.header.frame_id, "world");
+    ASSERT_EQ(line.points.size(), 2u);
+    EXPECT_EQ(text.type, Marker::TEXT_VIEW_FACING);
+    char score[32];
+    std::snprintf(score, sizeof(score), "%.2f m", listen.verdicts_[i].score);
+    EXPECT_TRUE(contains(text.text, score)) << text.text << " lacks " << score;
+    EXPECT_TRUE(contains(text.text, std::to_string(listen.verdicts_[i].query_index) + "->" +
+                                        std::to_string(listen.verdicts_[i].match_index)))
+        << text.text;
+  }
+  const Marker& red = listen.markers_[0].markers[0];
+  const Marker& green = listen.markers_[1].markers[0];
+  EXPECT_EQ(red.ns, "rejected_loops");
+  EXPECT_GT(red.color.r, red.color.g);
+  EXPECT_EQ(green.ns, "accepted_loops");
+  EXPECT_GT(green.color.g, green.color.r);
+  // The accepted loop is drawn at the verifier's corrected estimate: its ends meet (within
+  // the relative pose), whereas the VIO positions are metres apart after a lap of drift.
+  const Eigen::Vector3d g0(green.points[0].x, green.points[0].y, green.points[0].z);
+  const Eigen::Vector3d g1(green.points[1].x, green.points[1].y, green.points[1].z);
+  EXPECT_LT((g0 - g1).norm(), picks[1]->candidate.relative_t.norm() + 0.3);
+
+  // ~verdict_log
+  const std::vector<std::string> rows = readLines(log);
+  ASSERT_EQ(rows.size(), 3u) << log;
+  EXPECT_EQ(rows[0], core::verdictCsvHeader());
+  for (size_t i = 0; i < 2; ++i) {
+    const LoopVerdict& v = listen.verdicts_[i];
+    EXPECT_TRUE(contains(rows[i + 1], "," + std::to_string(v.query_index) + "," + std::to_string(v.match_index) +
+                                          (v.accepted ? ",1,accepted," : ",0,score_above_threshold,")))
+        << rows[i + 1];
+    EXPECT_TRUE(contains(rows[i + 1], std::string(",-1,") + kRover + ",")) << rows[i + 1];
+  }
+  std::remove(log.c_str());
+}
+
+TEST_F(Adapter, SixDofPoseGraphWithoutImu) {
+  // loop_fusion without IMU (setIMUFlag(false)): `mode: auto` gives the 6-DoF graph; the
+  // sequence shift in FakePoseGraph takes the full rotation, as loop_fusion does.
+  const sim::Scene s = corridor(2);
+  const std::vector<const sim::SimCandidate*> picks = falseThenTrue(s);
+  ASSERT_TRUE(picks[0] && picks[1]);
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(false));
+  std::vector<bool> has_loop;
+  for (const sim::SimKeyframe& k : s.keyframes) {
+    std::unique_ptr<Detection> d;
+    for (const sim::SimCandidate* c : picks)
+      if (c->candidate.query_index == k.index) d.reset(new Detection{static_cast<int>(c->candidate.match_index), loopInfo(c->candidate)});
+    const bool detected = d != nullptr;
+    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(k, 1), d.get());
+    if (detected) has_loop.push_back(kf.has_loop);
+    if (has_loop.size() == 2) break;
+  }
+  EXPECT_EQ(has_loop, (std::vector<bool>{false, true}));
+}
+
+TEST_F(Adapter, LoadedPoseGraphThenANewSession) {
+  // loadPoseGraph: laps 1-2 of a scene are the saved graph (sequence 0, with its stored
+  // loops); lap 3 is a new session (sequence 1) in its own VIO frame.
+  const sim::Scene s = corridor(3);
+  const int per_lap = static_cast<int>(s.keyframes.size() / 3);
+  const std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(s);
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+
+  int stored = 0;
+  for (int i = 0; i < 2 * per_lap; ++i) {
+    FakeKeyFrame kf = keyframe(s.keyframes[i], 0);
+    auto c = candidates.find(i);
+    if (c != candidates.end() && c->second->is_true) {
+      kf.has_loop = true;
+      kf.loop_index = static_cast<int>(c->second->candidate.match_index);
+      kf.loop_info = loopInfo(c->second->candidate);
+      ++stored;
+    }
+    EXPECT_TRUE(pg.loadKeyFrame(kf)) << "stored loop of keyframe " << i;
+  }
+  ASSERT_GT(stored, 2);
+  EXPECT_EQ(pg.rover.verdictCount(), 0u);  // stored loops are not verdicts
+
+  // The new session starts in its own VIO frame.
+  const core::Pose session_frame(Eigen::Vector3d(4.0, -7.0, 0.5),
+                                 Eigen::Quaterniond(Eigen::AngleAxisd(0.8, Eigen::Vector3d::UnitZ())));
+  const core::Pose to_session = sim::relative(s.keyframes[2 * per_lap].vio, core::Pose());
+  core::Pose frame = sim::compose(session_frame, to_session);
+  std::vector<FakeKeyFrame> looped;
+  for (int i = 2 * per_lap; i < 3 * per_lap && looped.size() < 3; ++i) {
+    std::unique_ptr<Detection> d;
+    auto c = candidates.find(i);
+    if (c != candidates.end() && c->second->is_true)
+      d.reset(new Detection{static_cast<int>(c->second->candidate.match_index), loopInfo(c->second->candidate)});
+    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(s.keyframes[i], 1, frame), d.get());
+    if (d) looped.push_back(kf);
+  }
+  ASSERT_EQ(looped.size(), 3u);
+  ASSERT_TRUE(listen.waitFor(3, 3));
+  // The first loop into the loaded map has no trajectory prior (accept_without_prior: true),
+  // is used, and shifts the session into the map's frame (sequence_loop, w_r_vio).
+  EXPECT_TRUE(looped[0].has_loop);
+  EXPECT_EQ(listen.verdicts_[0].reason, LoopVerdict::NO_TRAJECTORY_PRIOR);
+  EXPECT_TRUE(listen.verdicts_[0].accepted);
+  EXPECT_EQ(pg.sequence_loop[1], 1);
+  // Later loops are verified against the prior, in the shifted frame loop_fusion hands over.
+  for (size_t i = 1; i < 3; ++i) {
+    EXPECT_TRUE(looped[i].has_loop) << listen.verdicts_[i].detail;
+    EXPECT_EQ(listen.verdicts_[i].reason, LoopVerdict::ACCEPTED) << listen.verdicts_[i].detail;
+    EXPECT_LT(listen.verdicts_[i].score, 0.2) << listen.verdicts_[i].detail;
+  }
+  EXPECT_EQ(pg.optimize_buf.size(), 3u);
+}
+
+TEST_F(Adapter, RejectedFirstLoopIntoAMapLeavesTheSequenceShiftAlone) {
+  // accept_without_prior: false (its own verifier namespace): the first loop of a new session
+  // has no prior and is rejected; loop_fusion must not shift the session for it.
+  ros::param::set("~verifier_name", "strict");
+  ros::param::set("~strict/accept_without_prior", false);
+  const sim::Scene s = corridor(2);
+  const int per_lap = static_cast<int>(s.keyframes.size() / 2);
+  const std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(s);
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  for (int i = 0; i < per_lap; ++i) pg.loadKeyFrame(keyframe(s.keyframes[i], 0));
+  const FakeKeyFrame* looped = nullptr;
+  for (int i = per_lap; i < 2 * per_lap && !looped; ++i) {
+    std::unique_ptr<Detection> d;
+    auto c = candidates.find(i);
+    if (c != candidates.end() && c->second->is_true)
+      d.reset(new Detection{static_cast<int>(c->second->candidate.match_index), loopInfo(c->second->candidate)});
+    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(s.keyframes[i], 1), d.get());
+    if (d) looped = &kf;
+  }
+  ros::param::del("~strict");
+  ASSERT_TRUE(looped);
+  EXPECT_FALSE(looped->has_loop);
+  EXPECT_EQ(pg.sequence_loop[1], 0);
+  EXPECT_TRUE(pg.w_r_vio.isIdentity());
+  EXPECT_TRUE(pg.w_t_vio.isZero());
+  EXPECT_EQ(pg.earliest_loop_index, -1);
+  EXPECT_TRUE(pg.optimize_buf.empty());
+}
+
+// ---- plugin selection ----------------------------------------------------------------------
+
+TEST_F(Adapter, AcceptAllPluginUsesEveryLoopLikeUpstream) {
+  ros::param::set("~verifier_type", kAcceptAll);
+  ros::param::set("~marker_frame", "map");
+  ros::param::set("~publish_markers", false);
+  const sim::Scene s = corridor(2);
+  const std::vector<const sim::SimCandidate*> picks = falseThenTrue(s);
+  ASSERT_TRUE(picks[0]);
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  Listener listen;
+  ASSERT_TRUE(listen.connect(false));
+  const FakeKeyFrame* looped = nullptr;
+  for (const sim::SimKeyframe& k : s.keyframes) {
+    std::unique_ptr<Detection> d;
+    if (k.index == picks[0]->candidate.query_index)
+      d.reset(new Detection{static_cast<int>(picks[0]->candidate.match_index), loopInfo(picks[0]->candidate)});
+    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(k, 1), d.get());
+    if (d) {
+      looped = &kf;
+      break;
+    }
+  }
+  ASSERT_TRUE(looped);
+  EXPECT_TRUE(looped->has_loop);  // the false loop the trajectory-prior verifier rejects
+  EXPECT_EQ(pg.optimize_buf.size(), 1u);
+  ASSERT_TRUE(listen.waitFor(1, 0));
+  EXPECT_TRUE(listen.verdicts_[0].accepted);
+  EXPECT_EQ(listen.verdicts_[0].verifier, kAcceptAll);
+  EXPECT_EQ(listen.verdicts_[0].header.frame_id, "map");
+  EXPECT_EQ(listen.markerPublishers(), 0u);  // ~publish_markers: false
+}
+
+TEST_F(Adapter, UnknownVerifierTypeFallsBackToAcceptAllOnlyWhenAskedTo) {
+  ros::param::set("~verifier_type", "rover_loop_fusion/NoSuchVerifier");
+  ros::param::set("~fallback_to_accept_all", true);
+  FakePoseGraph pg;
+  EXPECT_FALSE(pg.setIMUFlag(true));
+  EXPECT_FALSE(pg.rover.verifying());
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  const sim::Scene s = corridor(2);
+  const sim::SimCandidate* f = falseThenTrue(s)[0];
+  ASSERT_TRUE(f);
+  for (int64_t i = 0; i < f->candidate.query_index; ++i) pg.addKeyFrame(keyframe(s.keyframes[i], 1), nullptr);
+  const Detection d{static_cast<int>(f->candidate.match_index), loopInfo(f->candidate)};
+  EXPECT_TRUE(pg.addKeyFrame(keyframe(s.keyframes[f->candidate.query_index], 1), &d).has_loop);
+  ASSERT_TRUE(listen.waitFor(1, 1));
+  EXPECT_TRUE(listen.verdicts_[0].accepted);
+  EXPECT_EQ(listen.verdicts_[0].verifier, "fallback:accept_all");
+  EXPECT_TRUE(contains(listen.verdicts_[0].detail, "unknown verifier type 'rover_loop_fusion/NoSuchVerifier'"))
+      << listen.verdicts_[0].detail;
+  EXPECT_TRUE(contains(listen.verdicts_[0].detail, kRover)) << "lists the available types: " << listen.verdicts_[0].detail;
+}
+
+TEST_F(Adapter, BadVerifierParameterFallsBackToAcceptAllOnlyWhenAskedTo) {
+  ros::param::set("~verifier_name", "broken");
+  ros::param::set("~broken/threshold", -1.0);
+  ros::param::set("~fallback_to_accept_all", true);
+  FakePoseGraph pg;
+  EXPECT_FALSE(pg.setIMUFlag(true));
+  ros::param::del("~broken");
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  for (int i = 0; i < 60; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = i;
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0, 0);
+    pg.addKeyFrame(kf, nullptr);
+  }
+  FakeKeyFrame kf;
+  kf.time_stamp = 60;
+  const Detection d{0, (LoopInfo() << 0.1, 0, 0, 1, 0, 0, 0, 0).finished()};
+  EXPECT_TRUE(pg.addKeyFrame(kf, &d).has_loop);
+  ASSERT_TRUE(listen.waitFor(1, 1));
+  EXPECT_TRUE(contains(listen.verdicts_[0].detail, "threshold")) << listen.verdicts_[0].detail;
+  EXPECT_TRUE(contains(listen.verdicts_[0].detail, "/loop_fusion/broken")) << listen.verdicts_[0].detail;
+}
+
+// ---- configuration errors stop the host (child processes) ----------------------------------
+
+namespace {
+
+struct HostRun {
+  int exit_code = -1;
+  std::string output;
+};
+
+/// Runs test/ros/adapter_host.cpp (a stand-in for the patched loop_fusion_node) as node
+/// `name`, whose private parameters the caller has set.
+HostRun runHost(const std::string& name) {
+  HostRun r;
+  const std::string cmd = std::string(ROVER_ADAPTER_HOST) + " __name:=" + name + " 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof(buf), p)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+}  // namespace
+
+TEST(AdapterStop, ValidParametersStartTheHost) {
+  // The harness itself: a correct configuration gets through initialize and verifies.
+  const HostRun r = runHost("rover_host_ok");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "host: initialize returned true")) << r.output;
+  EXPECT_TRUE(contains(r.output, "host: verifyLoop returned")) << r.output;
+}
+
+TEST(AdapterStop, UnknownVerifierTypeStopsAndNamesTheParameter) {
+  ros::param::set("/rover_host_type/verifier_type", "rover_loop_fusion/Typo");
+  const HostRun r = runHost("rover_host_type");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_FALSE(contains(r.output, "host: initialize returned")) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_type/verifier_type")) << r.output;
+  EXPECT_TRUE(contains(r.output, "rover_loop_fusion/Typo")) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_type/fallback_to_accept_all")) << r.output;
+}
+
+TEST(AdapterStop, BadThresholdStopsAndNamesTheParameter) {
+  ros::param::set("/rover_host_threshold/rover/threshold", -1.0);
+  const HostRun r = runHost("rover_host_threshold");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_FALSE(contains(r.output, "host: initialize returned")) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_threshold/rover")) << r.output;
+  EXPECT_TRUE(contains(r.output, "threshold must be a positive number")) << r.output;
+}
+
+TEST(AdapterStop, WrongTypeOfAnAdapterParameterStops) {
+  // Even with the fallback on: the adapter's own parameters are not the plugin's.
+  ros::param::set("/rover_host_bool/publish_markers", std::string("yes"));
+  ros::param::set("/rover_host_bool/fallback_to_accept_all", true);
+  const HostRun r = runHost("rover_host_bool");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_bool/publish_markers must be true or false")) << r.output;
+}
+
+TEST(AdapterStop, UnwritableVerdictLogStops) {
+  ros::param::set("/rover_host_log/verdict_log", std::string("/nonexistent-dir/verdicts.csv"));
+  const HostRun r = runHost("rover_host_log");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_log/verdict_log")) << r.output;
+}
+
+// ---- host safety ---------------------------------------------------------------------------
+
+namespace {
+
+/// A verifier that misbehaves where it is told to.
+class MisbehavingVerifier : public LoopVerifier {
+ public:
+  bool throw_on_init = false, throw_on_add = false, throw_on_verify = false, throw_on_commit = false,
+       refuse_commit = false, throw_on_trajectory = false;
+  core::Status addKeyframe(int64_t, double, int, const Eigen::Vector3d&, const Eigen::Quaterniond&) override {
+    if (throw_on_add) throw std::runtime_error("addKeyframe exploded");
+    return core::Status::Ok();
+  }
+  core::Verdict verify(const core::LoopCandidate& c) override {
+    if (throw_on_verify) throw std::runtime_error("verify exploded");
+    core::Verdict v;
+    v.query_index = c.query_index;
+    v.match_index = c.match_index;
+    v.accepted = true;
+    v.reason = core::Reason::kAccepted;
+    return v;
+  }
+  core::Status commit(const core::LoopCandidate&) override {
+    if (throw_on_commit) throw 42;  // not even a std::exception
+    return refuse_commit ? core::Status::Error("no room") : core::Status::Ok();
+  }
+  std::vector<core::TrajectoryPoint> trajectory() const override {
+    if (throw_on_trajectory) throw std::runtime_error("trajectory exploded");
+    return {};
+  }
+
+ protected:
+  bool onInitialize() override {
+    if (throw_on_init) throw std::runtime_error("onInitialize exploded");
+    return true;
+  }
+};
+
+/// Two keyframes and one loop between them, as the patch hands them over.
+bool oneLoop(LoopFusionAdapter& rover) {
+  rover.addKeyframe(0, 1.0, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());
+  rover.addKeyframe(1, 2.0, 1, Eigen::Vector3d(1, 0, 0), Eigen::Matrix3d::Identity());
+  LoopInfo info;
+  info << 1, 0, 0, 1, 0, 0, 0, 0;
+  return rover.verifyLoop(1, 0, info);
+}
+
+}  // namespace
+
+TEST_F(Adapter, ExceptionsFromTheVerifierNeverReachTheHostAndRejectTheLoop) {
+  struct Case {
+    const char* what;
+    bool MisbehavingVerifier::*flag;
+    bool used;  // what verifyLoop must return
+    const char* detail;
+  };
+  const Case cases[] = {
+      {"verify throws", &MisbehavingVerifier::throw_on_verify, false, "verify exploded"},
+      {"commit throws a non-std exception", &MisbehavingVerifier::throw_on_commit, false, "exception"},
+      {"commit refused", &MisbehavingVerifier::refuse_commit, false, "refused to commit it: no room"},
+      {"addKeyframe throws", &MisbehavingVerifier::throw_on_add, true, ""},
+      // publishing fails after the commit: the loop is in the verifier's graph, so it is used
+      {"trajectory (markers) throws", &MisbehavingVerifier::throw_on_trajectory, true, nullptr},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    std::unique_ptr<MisbehavingVerifier> v(new MisbehavingVerifier);
+    (*v).*(c.flag) = true;
+    LoopFusionAdapter rover;
+    ASSERT_TRUE(rover.initializeWithVerifier(true, std::move(v), "test/Misbehaving"));
+    Listener listen;
+    ASSERT_TRUE(listen.connect());
+    EXPECT_EQ(oneLoop(rover), c.used);
+    if (!c.detail) {
+      EXPECT_EQ(rover.verdictCount(), 0u);  // the verdict could not be published
+      continue;
+    }
+    ASSERT_TRUE(listen.waitFor(1, 0));
+    EXPECT_EQ(listen.verdicts_[0].accepted, c.used);
+    EXPECT_EQ(listen.verdicts_[0].verifier, "test/Misbehaving");
+    EXPECT_TRUE(contains(listen.verdicts_[0].detail, c.detail)) << listen.verdicts_[0].detail;
+    if (!c.used) {
+      EXPECT_EQ(listen.verdicts_[0].reason, LoopVerdict::INVALID_INPUT);
+    }
+  }
+}
+
+TEST_F(Adapter, VerifierThatThrowsOnInitializeFallsBackWhenAskedTo) {
+  ros::param::set("~fallback_to_accept_all", true);
+  std::unique_ptr<MisbehavingVerifier> v(new MisbehavingVerifier);
+  v->throw_on_init = true;
+  LoopFusionAdapter rover;
+  EXPECT_FALSE(rover.initializeWithVerifier(true, std::move(v), "test/Misbehaving"));
+  EXPECT_FALSE(rover.verifying());
+  EXPECT_TRUE(oneLoop(rover));
+}
+
+TEST_F(Adapter, WithoutInitializeEveryLoopIsRejected) {
+  LoopFusionAdapter rover;
+  EXPECT_FALSE(oneLoop(rover));
+  EXPECT_FALSE(rover.commitStoredLoop(1, 0, LoopInfo::Zero()));
+  EXPECT_FALSE(rover.verifying());
+  EXPECT_EQ(rover.verdictCount(), 0u);
+}
+
+TEST_F(Adapter, SecondInitializeIsIgnored) {
+  LoopFusionAdapter rover;
+  ASSERT_TRUE(rover.initialize(true));
+  ros::param::set("~verifier_type", "rover_loop_fusion/NoSuchVerifier");
+  EXPECT_TRUE(rover.initialize(false));
+  EXPECT_TRUE(rover.verifying());
+}
+
+TEST_F(Adapter, BadCandidatesAreRejectedNotThrown) {
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  for (int i = 0; i < 3; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = i;
+    pg.addKeyFrame(kf, nullptr);
+  }
+  const double nan = std::nan("");
+  EXPECT_FALSE(pg.rover.verifyLoop(2, 0, (LoopInfo() << nan, 0, 0, 1, 0, 0, 0, 0).finished()));
+  EXPECT_FALSE(pg.rover.verifyLoop(2, 0, (LoopInfo() << 0, 0, 0, 0, 0, 0, 0, 0).finished()));  // zero quaternion
+  EXPECT_FALSE(pg.rover.verifyLoop(2, 99, (LoopInfo() << 0, 0, 0, 1, 0, 0, 0, 0).finished()));  // unknown match
+  EXPECT_FALSE(pg.rover.verifyLoop(0, 2, (LoopInfo() << 0, 0, 0, 1, 0, 0, 0, 0).finished()));   // match newer
+  EXPECT_EQ(pg.rover.verdictCount(), 4u);
+  pg.rover.addKeyframe(3, 0.5, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());  // stamp goes back
+  pg.rover.addKeyframe(4, 9.0, 1, Eigen::Vector3d::Constant(nan), Eigen::Matrix3d::Identity());
+  EXPECT_FALSE(pg.rover.verifyLoop(4, 0, (LoopInfo() << 0, 0, 0, 1, 0, 0, 0, 0).finished()));
+}
+
+// ---- the shipped YAMLs through the parameter server ----------------------------------------
+
+TEST(ConfigFiles, ShippedYamlsLoadWithoutErrorsOrWarnings) {
+  // adapter.test loads them into /yaml_check/{indoor,outdoor} with rosparam, as the launch
+  // file does.
+  const std::pair<const char*, double> files[] = {{"/yaml_check/indoor", 0.5}, {"/yaml_check/outdoor", 1.0}};
+  for (const auto& f : files) {
+    SCOPED_TRACE(f.first);
+    ASSERT_TRUE(ros::param::has(std::string(f.first) + "/threshold"));
+    const ConfigLoad load = loadVerifierConfig(ros::NodeHandle(f.first), true);
+    EXPECT_TRUE(load.ok()) << (load.errors.empty() ? "" : load.errors[0]);
+    EXPECT_TRUE(load.warnings.empty()) << (load.warnings.empty() ? "" : load.warnings[0]);
+    EXPECT_DOUBLE_EQ(load.config.threshold, f.second);
+    const core::VerifierConfig defaults;
+    EXPECT_EQ(load.config.mode, core::Mode::kFourDof);
+    EXPECT_EQ(load.config.max_iterations, defaults.max_iterations);
+    EXPECT_DOUBLE_EQ(load.config.time_budget_ms, defaults.time_budget_ms);
+    EXPECT_NEAR(load.config.max_relative_yaw, defaults.max_relative_yaw, 1e-12);
+    EXPECT_EQ(load.config.anchor_incoming_keyframes, false);
+  }
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "loop_fusion");
+  ros::NodeHandle nh("~");
+  return RUN_ALL_TESTS();
+}
