@@ -61,6 +61,9 @@ std::string VerifierConfig::validate() const {
   positive("max_relative_yaw", max_relative_yaw);
   positive("quaternion_tolerance", quaternion_tolerance);
   positive("function_tolerance", function_tolerance);
+  if (!(std::isfinite(threshold_per_metre) && threshold_per_metre >= 0))
+    e << "threshold_per_metre must be >= 0 (got " << threshold_per_metre << "); ";
+  if (!std::isfinite(max_threshold)) e << "max_threshold must be finite; ";
   if (max_iterations < 1) e << "max_iterations must be >= 1 (got " << max_iterations << "); ";
   if (!std::isfinite(time_budget_ms)) e << "time_budget_ms must be finite; ";
   if (odometry_neighbours < 1)

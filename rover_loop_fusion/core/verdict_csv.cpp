@@ -20,7 +20,7 @@ std::string quoted(const std::string& s) {
 
 std::string verdictCsvHeader() {
   return "query_stamp,match_stamp,query_index,match_index,accepted,reason,score,threshold,converged,"
-         "iterations,window_size,solve_ms,elapsed_ms,inliers,verifier,detail";
+         "iterations,window_size,solve_ms,elapsed_ms,inliers,innovation,path_length,verifier,detail";
 }
 
 std::string verdictCsvRow(const Verdict& v, double query_stamp, double match_stamp, int inliers,
@@ -30,7 +30,8 @@ std::string verdictCsvRow(const Verdict& v, double query_stamp, double match_sta
     << v.query_index << ',' << v.match_index << ',' << (v.accepted ? 1 : 0) << ','
     << toString(v.reason) << ',' << std::setprecision(6) << v.score << ',' << v.threshold << ','
     << (v.converged ? 1 : 0) << ',' << v.iterations << ',' << v.window_size << ',' << v.solve_ms
-    << ',' << v.elapsed_ms << ',' << inliers << ',' << verifier << ',' << quoted(v.detail);
+    << ',' << v.elapsed_ms << ',' << inliers << ',' << v.innovation << ',' << v.path_length << ','
+    << verifier << ',' << quoted(v.detail);
   return s.str();
 }
 

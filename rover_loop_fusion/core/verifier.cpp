@@ -9,6 +9,7 @@
 #include <cmath>
 #include <deque>
 #include <map>
+#include <queue>
 #include <sstream>
 
 namespace rover_loop_fusion {
@@ -79,6 +80,7 @@ struct Verifier::Impl {
 
   const VerifierConfig& cfg;
   std::vector<Keyframe> kfs;
+  std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's sequence
   std::vector<State> x;
   std::vector<Edge> odometry;  // appended in increasing `to`
   std::vector<Edge> loops;
@@ -338,6 +340,62 @@ struct Verifier::Impl {
     return o;
   }
 
+  /// |t_meas - t_X|: where the candidate puts the query in the match frame vs where X has it.
+  double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+    const Pose q = poseFromState(x[qpos], kfs[qpos]);
+    const Pose m = poseFromState(x[mpos], kfs[mpos]);
+    return (m.q.conjugate() * (q.t - m.t) - c.relative_t).norm();
+  }
+
+  /// Shortest odometry path [m] from keyframe `from` to `to` through the graph: along a
+  /// sequence by arc length, across accepted loops for free. Dijkstra over the two ends and
+  /// the loop endpoints only (arc-length differences give the chain distances), so the cost
+  /// grows with the number of loops, not of keyframes. Infinite if nothing connects them.
+  double pathLength(size_t from, size_t to) const {
+    std::vector<size_t> nodes = {from, to};
+    for (const Edge& e : loops) {
+      nodes.push_back(e.from);
+      nodes.push_back(e.to);
+    }
+    std::sort(nodes.begin(), nodes.end());
+    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+    const size_t n = nodes.size();
+    auto id = [&](size_t p) {
+      return static_cast<int>(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin());
+    };
+    std::vector<std::vector<std::pair<int, double>>> adj(n);
+    for (size_t i = 1; i < n; ++i) {
+      if (kfs[nodes[i - 1]].sequence != kfs[nodes[i]].sequence) continue;
+      const double d = arc[nodes[i]] - arc[nodes[i - 1]];
+      adj[i - 1].emplace_back(static_cast<int>(i), d);
+      adj[i].emplace_back(static_cast<int>(i - 1), d);
+    }
+    for (const Edge& e : loops) {
+      adj[id(e.from)].emplace_back(id(e.to), 0.0);
+      adj[id(e.to)].emplace_back(id(e.from), 0.0);
+    }
+    const int src = id(from), dst = id(to);
+    std::vector<double> dist(n, std::numeric_limits<double>::infinity());
+    using Item = std::pair<double, int>;
+    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+    dist[src] = 0.0;
+    queue.emplace(0.0, src);
+    while (!queue.empty()) {
+      const Item top = queue.top();
+      queue.pop();
+      if (top.first > dist[top.second]) continue;
+      if (top.second == dst) break;
+      for (const auto& nb : adj[top.second]) {
+        const double d = top.first + nb.second;
+        if (d < dist[nb.first]) {
+          dist[nb.first] = d;
+          queue.emplace(d, nb.first);
+        }
+      }
+    }
+    return dist[dst];
+  }
+
   size_t windowStart(size_t match_pos) const {
     const size_t margin = static_cast<size_t>(std::max(0, cfg.window_margin));
     return match_pos > margin ? match_pos - margin : 0;
@@ -449,6 +507,8 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
     const Correction drift = m.correctionBetween(m.stateFromPose(prev.vio), m.x.back(), prev);
     s = m.applyCorrection(drift, s, kf);
   }
+  const bool continues = pos > 0 && m.kfs.back().sequence == sequence;
+  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - m.kfs.back().vio.t).norm() : 0.0);
   m.kfs.push_back(kf);
   m.x.push_back(s);
   m.root(sequence);
@@ -504,6 +564,12 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   Impl::Trial tr;
   m.buildTrial(tr, m.windowStart(mpos), m.root(qseq), false, &cand,
                config_.robust_candidate ? m.huber.get() : nullptr);
+  v.innovation = m.innovation(c, qpos, mpos);
+  v.path_length = m.pathLength(mpos, qpos);
+  if (config_.threshold_per_metre > 0 && std::isfinite(v.path_length)) {
+    v.threshold += config_.threshold_per_metre * v.path_length;
+    if (config_.max_threshold > 0) v.threshold = std::min(v.threshold, config_.max_threshold);
+  }
   const std::vector<State>& before = m.x;
   Impl::SolveOutcome o = m.solve(tr, config_.max_iterations, config_.time_budget_ms);
   v.iterations = o.iterations;
@@ -539,12 +605,12 @@ Verdict Verifier::verify(const LoopCandidate& c) {
       << (o.finite ? o.message : "non-finite solution") << ")";
     return finish(Reason::kNotConverged, false, s.str());
   }
-  if (v.score > config_.threshold) {
-    s << "score " << std::fixed << v.score << " m > threshold " << config_.threshold << " m over "
+  if (v.score > v.threshold) {
+    s << "score " << std::fixed << v.score << " m > threshold " << v.threshold << " m over "
       << v.window_size << " keyframes";
     return finish(Reason::kScoreAboveThreshold, false, s.str());
   }
-  s << "score " << std::fixed << v.score << " m <= threshold " << config_.threshold << " m over "
+  s << "score " << std::fixed << v.score << " m <= threshold " << v.threshold << " m over "
     << v.window_size << " keyframes";
   m.pending.valid = true;
   m.pending.candidate = c;

@@ -40,6 +40,8 @@ LoopVerdict toMsg(const core::Verdict& v, const VerdictContext& ctx, const std::
   m.converged = v.converged;
   m.iterations = v.iterations;
   m.window_size = v.window_size;
+  m.innovation = v.innovation;
+  m.path_length = v.path_length;
   m.solve_ms = v.solve_ms;
   m.elapsed_ms = v.elapsed_ms;
   m.inliers = ctx.inliers;

@@ -4,6 +4,7 @@
 //
 //   rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]
 //                [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]
+//                [--threshold_per_metre K] [--max_threshold M]
 //                [--window_margin N] [--time_budget_ms MS] [--robust_candidate] [--quiet]
 //
 // Protocols:
@@ -38,9 +39,16 @@ int usage(int code) {
   std::fprintf(code ? stderr : stdout,
                "usage: rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]\n"
                "                    [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]\n"
+               "                    [--threshold_per_metre K] [--max_threshold M]\n"
                "                    [--window_margin N] [--time_budget_ms MS] [--robust_candidate]\n"
                "                    [--quiet]\n");
   return code;
+}
+
+/// mkdir -p
+void makeDirs(const std::string& path) {
+  for (size_t i = 1; i <= path.size(); ++i)
+    if (i == path.size() || path[i] == '/') mkdir(path.substr(0, i).c_str(), 0755);
 }
 
 bool writeTum(const std::string& path, const std::vector<double>& stamps,
@@ -76,6 +84,8 @@ int main(int argc, char** argv) {
     } else if (a == "--alignment") {
       if (!core::parseAlignment(value(), &cfg.alignment)) return usage(2);
     } else if (a == "--threshold") cfg.threshold = std::atof(value().c_str());
+    else if (a == "--threshold_per_metre") cfg.threshold_per_metre = std::atof(value().c_str());
+    else if (a == "--max_threshold") cfg.max_threshold = std::atof(value().c_str());
     else if (a == "--window_margin") cfg.window_margin = std::atoi(value().c_str());
     else if (a == "--time_budget_ms") cfg.time_budget_ms = std::atof(value().c_str());
     else if (a == "--robust_candidate") cfg.robust_candidate = true;
@@ -96,7 +106,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "rover_replay: %s\n", error.c_str());
     return 1;
   }
-  mkdir(out_dir.c_str(), 0755);
+  makeDirs(out_dir);
   std::FILE* csv = std::fopen((out_dir + "/verdicts.csv").c_str(), "w");
   if (!csv) {
     std::fprintf(stderr, "rover_replay: cannot write %s/verdicts.csv\n", out_dir.c_str());

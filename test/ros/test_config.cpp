@@ -64,7 +64,7 @@ void checkDocumented(const std::string& file, const std::string& threshold) {
 
 }  // namespace
 
-TEST(ConfigFiles, IndoorYamlDocumentsEveryParameter) { checkDocumented("rover_indoor.yaml", "0.5"); }
+TEST(ConfigFiles, IndoorYamlDocumentsEveryParameter) { checkDocumented("rover_indoor.yaml", "0.15"); }
 
 TEST(ConfigFiles, OutdoorYamlDocumentsEveryParameter) { checkDocumented("rover_outdoor.yaml", "1.0"); }
 
