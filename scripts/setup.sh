@@ -19,6 +19,7 @@ ROVER_DEPS=(
   libceres-dev libeigen3-dev libopencv-dev libgtest-dev googletest
   python3-rosbag python3-roslaunch python3-rostest python3-rosnode python3-rostopic
   python3-numpy python3-pytest rosbash
+  clang-14 libclang-rt-14-dev
 )
 
 rover_install_deps() {

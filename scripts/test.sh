@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite: set-up on first use, then every gtest, rostest and pytest of the
-# package. Ends with 'rover tests: N passed, M failed, K skipped'; exit status 1 if any test
+# package, the core gtests again under ASan+UBSan, and a short fuzz run. Ends with 'rover tests: N passed, M failed, K skipped'; exit status 1 if any test
 # failed, errored or could not run.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
@@ -15,7 +15,15 @@ grep -E '^\[( +OK|  FAILED|  PASSED|==========)|^(SUMMARY|\[ROSTEST\])|FAILURE|E
 pytest_rc=0
 ROVER_WS="$ROVER_WS" /usr/bin/python3 -m pytest -q -p no:cacheprovider "$ROVER_ROOT/test/python" \
   --junitxml="$ROVER_WS/build/test_results/rover_loop_fusion/pytest-python.xml" || pytest_rc=$?
+# Hardening: the core gtests under ASan+UBSan (second build space) and the libFuzzer targets
+# (committed corpus + ROVER_FUZZ_SECONDS of fuzzing each). Their JUnit files join the summary.
+results="$ROVER_WS/build/test_results/rover_loop_fusion"
+hardening_rc=0
+ROVER_WS="$ROVER_WS" ROVER_RESULTS="$results" "$ROVER_ROOT/scripts/sanitize.sh" || hardening_rc=$?
+ROVER_WS="$ROVER_WS" ROVER_RESULTS="$results" "$ROVER_ROOT/scripts/fuzz.sh" || hardening_rc=$?
 summary_rc=0
 /usr/bin/python3 "$ROVER_ROOT/scripts/test_summary.py" "$ROVER_WS/build/test_results" || summary_rc=$?
 if [ "$pytest_rc" -gt 1 ]; then echo "[rover] pytest could not run (exit $pytest_rc)" >&2; exit 1; fi
+# A sanitizer or fuzz build that failed to build writes no JUnit file: fail on its status too.
+if [ "$hardening_rc" -ne 0 ] && [ "$summary_rc" -eq 0 ]; then exit 1; fi
 exit "$summary_rc"

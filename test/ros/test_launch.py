@@ -3,6 +3,7 @@
 VINS-Fusion is not needed): the nodes it starts, the parameters the loop_fusion adapter and
 the verifier plugin get for each verifier:=A/B choice, and the rviz config it points at."""
 import os
+import tempfile
 import unittest
 
 import roslaunch.config
@@ -16,7 +17,8 @@ ROOT = rospkg.RosPack().get_path(PKG)
 LAUNCH = os.path.join(ROOT, "launch", "vins_rover.launch")
 VINS_CONFIG = "/path/to/VINS-Fusion/config/euroc/euroc_stereo_imu_config.yaml"
 PARAM_NAMES = [  # rover_loop_fusion::verifierParameterNames(); test_config.cpp checks the YAMLs
-    "mode", "alignment", "threshold", "accept_without_prior", "max_iterations", "time_budget_ms",
+    "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "accept_without_prior",
+    "max_iterations", "time_budget_ms",
     "function_tolerance", "odometry_neighbours", "loop_huber", "robust_candidate", "window_margin",
     "max_relative_translation", "max_relative_yaw_deg", "quaternion_tolerance",
     "anchor_incoming_keyframes"]
@@ -87,6 +89,21 @@ class VinsRoverLaunch(unittest.TestCase):
         loader.ignore_unset_args = False  # (not set by every roslaunch version's constructor)
         with self.assertRaisesRegex(roslaunch.core.RLException, "config_file"):
             loader.load(LAUNCH, roslaunch.config.ROSLaunchConfig(), argv=[], verbose=False)
+
+    def test_missing_or_broken_parameter_file_stops_the_launch_naming_it(self):
+        # A verifier YAML that does not exist or does not parse stops roslaunch before any
+        # node starts, with the file in the message (values of the wrong type or range are
+        # the adapter's business: test_adapter.cpp, AdapterStop.*).
+        missing = "/nonexistent/rover_params.yaml"
+        with self.assertRaisesRegex(roslaunch.core.RLException, "rover_params.yaml"):
+            load("verifier_config:=" + missing)
+        with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as f:
+            f.write("threshold: [0.15\nmode: auto\n")
+        try:
+            with self.assertRaisesRegex(roslaunch.core.RLException, os.path.basename(f.name)):
+                load("verifier_config:=" + f.name)
+        finally:
+            os.unlink(f.name)
 
 
 if __name__ == "__main__":
