@@ -4,4 +4,4 @@
 # Extra arguments go to roslaunch, e.g. rviz:=true, threshold:=0.5, bag:=/abs/path/scenario.bag.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
-exec roslaunch rover_loop_fusion demo.launch "$@"
+exec roslaunch --no-summary rover_loop_fusion demo.launch "$@"
