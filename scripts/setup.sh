@@ -17,6 +17,7 @@ export PATH="/usr/bin:$PATH"
 ROVER_DEPS=(
   catkin ros-core-dev pluginlib-dev libtf2-dev libtf2-ros-dev libtf2-eigen-dev
   libceres-dev libeigen3-dev libopencv-dev libgtest-dev googletest
+  python3-nav-msgs
   python3-rosbag python3-roslaunch python3-rostest python3-rosnode python3-rostopic
   python3-numpy python3-pytest rosbash
   clang-14 libclang-rt-14-dev

@@ -1,12 +1,18 @@
 #!/usr/bin/env python3
 """Makes a scenario directory (docs/scenario-format.md): keyframes with drift, labelled loop
-candidates, ground truth; fixed seed.
+candidates, ground truth; fixed seed. With --bag also DIR/scenario.bag for rover_verifier_node
+(keyframe poses + loop candidates; the labels stay in DIR).
 
   simulate.py --scene room|sports_ground|warehouse|parking_deck|corridor --sigma 0.05 --out DIR
   simulate.py --real euroc_mh01|euroc_mh03|euroc_mh05|euroc_mh04_mono{0,1,2}|kitti_09 --out DIR
+  simulate.py --estimate EST.tum --groundtruth GT.tum --out DIR      (your own trajectory)
 
-Run with /usr/bin/python3. Real data is read from ../shared/data (ROVER_SHARED_DATA
-overrides)."""
+Your own trajectory: a VIO/VO estimate and its ground truth as TUM files (stamp x y z qx qy qz
+qw; stamps associated within 10 ms); keyframes are taken from the estimate, true candidates
+at ground-truth revisits, false ones between places 3-15 m apart (10-60 m with --outdoor).
+
+Run with /usr/bin/python3 (--bag: after sourcing the workspace's devel/setup.bash). Real data
+is read from ../shared/data (ROVER_SHARED_DATA overrides)."""
 import argparse
 import os
 import sys
@@ -15,26 +21,45 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from roverlib import real_data, scenario, scenes  # noqa: E402
 
+BAG_NAME = "scenario.bag"
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     src = ap.add_mutually_exclusive_group(required=True)
     src.add_argument("--scene", choices=sorted(scenes.SCENES))
     src.add_argument("--real", choices=sorted(real_data.SEQUENCES))
+    src.add_argument("--estimate", metavar="EST.tum", help="your own VIO/VO estimate (TUM format)")
+    ap.add_argument("--groundtruth", metavar="GT.tum", help="ground truth of --estimate (TUM format)")
+    ap.add_argument("--outdoor", action="store_true", help="--estimate: outdoor distances (keyframes 1 m apart, ...)")
     ap.add_argument("--sigma", type=float, default=0.05, help="odometry noise level (simulated scenes)")
     ap.add_argument("--six-dof", action="store_true", help="roll/pitch drift too (VO without IMU)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--true", dest="n_true", type=int, default=100)
     ap.add_argument("--false", dest="n_false", type=int, default=100)
     ap.add_argument("--out", required=True)
+    ap.add_argument("--bag", action="store_true", help=f"also write OUT/{BAG_NAME} for rover_verifier_node")
     a = ap.parse_args(argv)
+    if a.estimate and not a.groundtruth:
+        ap.error("--estimate needs --groundtruth")
     if a.scene:
         s = scenes.make_scene(a.scene, a.sigma, a.seed, a.n_true, a.n_false, a.six_dof)
-    else:
+    elif a.real:
         s = real_data.make_real(a.real, a.seed, a.n_true, a.n_false)
+    else:
+        name = "tum_" + os.path.splitext(os.path.basename(a.estimate))[0]
+        real_data.SEQUENCES[name] = (os.path.abspath(a.estimate), os.path.abspath(a.groundtruth),
+                                     "6dof" if a.six_dof else "4dof", "se3", "outdoor" if a.outdoor else "indoor")
+        s = real_data.make_real(name, a.seed, a.n_true, a.n_false)
     scenario.write(s, a.out)
     print(f"{s.name}: {len(s.keyframes)} keyframes, {s.meta['true_candidates']} true and "
           f"{s.meta['false_candidates']} false candidates -> {a.out}")
+    if a.bag:
+        from roverlib import bag  # needs ROS (source devel/setup.bash)
+        path = os.path.join(a.out, BAG_NAME)
+        # From the files just written: the bag holds exactly the numbers the labels refer to.
+        n_kf, n_c = bag.write_bag(scenario.read(a.out), path)
+        print(f"{path}: {n_kf} keyframe poses on {bag.KEYFRAME_TOPIC}, {n_c} candidates on {bag.CANDIDATE_TOPIC}")
     return 0
 
 

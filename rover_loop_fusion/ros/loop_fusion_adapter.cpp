@@ -1,17 +1,18 @@
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
 
+#include "rover_loop_fusion/LoopCandidate.h"
 #include "rover_loop_fusion/ros/loop_verifier.h"
 #include "rover_loop_fusion/ros/params.h"
 #include "rover_loop_fusion/ros/verdict_output.h"
+#include "rover_loop_fusion/ros/verifier_loader.h"
 
 #include <Eigen/Geometry>
-#include <pluginlib/class_loader.hpp>
 #include <ros/console.h>
 #include <ros/init.h>
-#include <ros/names.h>
 #include <ros/this_node.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
@@ -23,12 +24,11 @@ namespace rover_loop_fusion {
 
 namespace {
 
-const char kDefaultVerifierType[] = "rover_loop_fusion/TrajectoryPriorVerifier";
 const char kFallbackVerifierType[] = "fallback:accept_all";
 
 /// The adapter's own parameters (the plugin reads its own from ~<verifier_name>/).
 struct AdapterParams {
-  std::string verifier_type = kDefaultVerifierType;
+  std::string verifier_type = kTrajectoryPriorVerifierType;
   std::string verifier_name = "rover";
   bool fallback_to_accept_all = false;
   std::string verdict_log;
@@ -70,19 +70,16 @@ struct LoopFusionAdapter::Impl {
     double stamp = 0.0;
     Eigen::Vector3d position = Eigen::Vector3d::Zero();  // VIO position as handed in
   };
-  typedef std::unique_ptr<LoopVerifier, std::function<void(LoopVerifier*)>> VerifierPtr;
-
   mutable std::mutex mutex;
   Mode mode = Mode::kUninitialized;
   std::string failure;  // why kFallback / kFailed
   std::string verifier_type;
   AdapterParams params;
   std::unique_ptr<ros::NodeHandle> nh;
-  // The loader must outlive the verifier it created: declared first, destroyed last.
-  std::unique_ptr<pluginlib::ClassLoader<LoopVerifier>> loader;
   VerifierPtr verifier;
   VerdictOutput output;
   bool output_ready = false;
+  ros::Publisher candidate_pub;  // ~loop_candidates: every candidate, before it is verified
   std::unordered_map<int64_t, KeyframeInfo> keyframes;
   size_t verdicts = 0;
 
@@ -90,7 +87,7 @@ struct LoopFusionAdapter::Impl {
   bool safeStart(bool use_imu, VerifierPtr injected, const std::string& injected_type);
   bool start(bool use_imu, VerifierPtr injected, const std::string& injected_type);
   [[noreturn]] void fatal(const std::string& message);
-  void loadPlugin(std::string* error);
+  void publishCandidate(const core::LoopCandidate& c, const LoopInfo& loop_info);
   void publish(const core::Verdict& v, const core::LoopCandidate& c, const std::string& type);
   bool findPosition(const std::vector<core::TrajectoryPoint>& trajectory, int64_t index,
                     Eigen::Vector3d* position) const;
@@ -102,29 +99,6 @@ void LoopFusionAdapter::Impl::fatal(const std::string& message) {
   ROS_FATAL("[rover] the loop verifier cannot start: %s. Stopping %s.", message.c_str(),
             ros::this_node::getName().c_str());
   stopProcess();
-}
-
-void LoopFusionAdapter::Impl::loadPlugin(std::string* error) {
-  const std::string type_param = nh->resolveName("verifier_type");
-  try {
-    loader.reset(new pluginlib::ClassLoader<LoopVerifier>("rover_loop_fusion",
-                                                          "rover_loop_fusion::LoopVerifier"));
-    if (!loader->isClassAvailable(verifier_type)) {
-      std::vector<std::string> known = loader->getDeclaredClasses();
-      std::sort(known.begin(), known.end());
-      *error = "parameter " + type_param + ": unknown verifier type '" + verifier_type +
-               "' (available: " + join(known, ", ") + ")";
-      return;
-    }
-    verifier = loader->createUniqueInstance(verifier_type);
-    if (!verifier) *error = "parameter " + type_param + ": pluginlib returned no instance of '" + verifier_type + "'";
-    return;
-  } catch (const std::exception& e) {
-    *error = "parameter " + type_param + ": cannot load verifier plugin '" + verifier_type + "': " + e.what();
-  } catch (...) {
-    *error = "parameter " + type_param + ": cannot load verifier plugin '" + verifier_type + "'";
-  }
-  verifier.reset();
 }
 
 bool LoopFusionAdapter::Impl::start(bool use_imu, VerifierPtr injected, const std::string& injected_type) {
@@ -150,9 +124,7 @@ bool LoopFusionAdapter::Impl::start(bool use_imu, VerifierPtr injected, const st
   r.text("verdict_log", &params.verdict_log);
   r.text("marker_frame", &params.marker_frame);
   r.boolean("publish_markers", &params.publish_markers);
-  std::string name_error;
-  if (params.verifier_name.empty() || !ros::names::validate(params.verifier_name, name_error) ||
-      params.verifier_name.find('/') != std::string::npos || params.verifier_name[0] == '~')
+  if (!validVerifierName(params.verifier_name))
     r.error("verifier_name", "must be a plain name such as rover (got '" + params.verifier_name + "')");
   if (params.marker_frame.empty()) r.error("marker_frame", "must not be empty");
   if (!errors.empty()) fatal(join(errors, "; "));
@@ -165,27 +137,21 @@ bool LoopFusionAdapter::Impl::start(bool use_imu, VerifierPtr injected, const st
   if (!output.initialize(*nh, o, &output_error))
     fatal("parameter " + nh->resolveName("verdict_log") + ": " + output_error);
   output_ready = true;
+  candidate_pub = nh->advertise<LoopCandidate>("loop_candidates", 100);
 
   std::string plugin_error;
   if (injected) {
     verifier = std::move(injected);
     verifier_type = injected_type;
   } else {
-    verifier_type = params.verifier_type;
-    loadPlugin(&plugin_error);
+    verifier_type = resolveVerifierType(params.verifier_type);
+    verifier = loadVerifierPlugin(params.verifier_type, nh->resolveName("verifier_type"), &plugin_error);
   }
   if (verifier) {
     HostInfo host;
     host.uses_imu = use_imu;
     host.shifts_sequences = true;  // loop_fusion hands poses after its w_r_vio/w_t_vio shift
-    try {
-      if (!verifier->initialize(params.verifier_name, *nh, host))
-        plugin_error = verifier_type + ": " + verifier->error();
-    } catch (const std::exception& e) {
-      plugin_error = verifier_type + ": initialize threw: " + e.what();
-    } catch (...) {
-      plugin_error = verifier_type + ": initialize threw";
-    }
+    initializeVerifier(*verifier, verifier_type, params.verifier_name, *nh, host, &plugin_error);
   }
   if (plugin_error.empty()) {
     mode = Mode::kVerifying;
@@ -209,17 +175,34 @@ bool LoopFusionAdapter::Impl::start(bool use_imu, VerifierPtr injected, const st
 
 bool LoopFusionAdapter::Impl::findPosition(const std::vector<core::TrajectoryPoint>& trajectory,
                                            int64_t index, Eigen::Vector3d* position) const {
-  // trajectory() is ordered by index (indices are strictly increasing).
-  auto it = std::lower_bound(trajectory.begin(), trajectory.end(), index,
-                             [](const core::TrajectoryPoint& p, int64_t i) { return p.index < i; });
-  if (it != trajectory.end() && it->index == index) {
-    *position = it->estimate.t;
-    return true;
-  }
+  if (findTrajectoryPosition(trajectory, index, position)) return true;
   auto kf = keyframes.find(index);
   if (kf == keyframes.end()) return false;
   *position = kf->second.position;
   return true;
+}
+
+void LoopFusionAdapter::Impl::publishCandidate(const core::LoopCandidate& c, const LoopInfo& loop_info) {
+  // Named by stamp (index -1): loop_fusion's keyframe indices count only the keyframe poses it
+  // turned into keyframes, whereas rover_verifier_node numbers every pose it receives.
+  LoopCandidate m;
+  auto q = keyframes.find(c.query_index), k = keyframes.find(c.match_index);
+  if (q != keyframes.end()) m.query_stamp = ros::Time(std::max(0.0, q->second.stamp));
+  if (k != keyframes.end()) m.match_stamp = ros::Time(std::max(0.0, k->second.stamp));
+  m.header.stamp = m.query_stamp;
+  m.header.frame_id = params.marker_frame;
+  m.query_index = -1;
+  m.match_index = -1;
+  m.relative_pose.position.x = loop_info(0);
+  m.relative_pose.position.y = loop_info(1);
+  m.relative_pose.position.z = loop_info(2);
+  m.relative_pose.orientation.w = loop_info(3);
+  m.relative_pose.orientation.x = loop_info(4);
+  m.relative_pose.orientation.y = loop_info(5);
+  m.relative_pose.orientation.z = loop_info(6);
+  m.relative_yaw = loop_info(7) * M_PI / 180.0;
+  m.inliers = c.inliers;
+  candidate_pub.publish(m);
 }
 
 void LoopFusionAdapter::Impl::publish(const core::Verdict& v, const core::LoopCandidate& c,
@@ -267,11 +250,11 @@ bool LoopFusionAdapter::Impl::safeStart(bool use_imu, VerifierPtr injected, cons
   return false;
 }
 
-bool LoopFusionAdapter::initialize(bool use_imu) { return impl_->safeStart(use_imu, Impl::VerifierPtr(), ""); }
+bool LoopFusionAdapter::initialize(bool use_imu) { return impl_->safeStart(use_imu, VerifierPtr(), ""); }
 
 bool LoopFusionAdapter::initializeWithVerifier(bool use_imu, std::unique_ptr<LoopVerifier> verifier,
                                                const std::string& verifier_type) {
-  return impl_->safeStart(use_imu, Impl::VerifierPtr(verifier.release(), std::default_delete<LoopVerifier>()),
+  return impl_->safeStart(use_imu, VerifierPtr(verifier.release(), std::default_delete<LoopVerifier>()),
                           verifier_type);
 }
 
@@ -300,6 +283,17 @@ bool LoopFusionAdapter::verifyLoop(int query_index, int match_index, const LoopI
     std::lock_guard<std::mutex> lock(impl_->mutex);
     Impl& m = *impl_;
     const core::LoopCandidate c = core::candidateFromLoopInfo(query_index, match_index, loop_info.data(), inliers);
+    if (m.candidate_pub) {
+      // Before the verdict: a recording of /vins_estimator/keyframe_pose and ~loop_candidates
+      // can be replayed through rover_verifier_node with other parameters.
+      try {
+        m.publishCandidate(c, loop_info);
+      } catch (const std::exception& e) {
+        ROS_ERROR("[rover] publishing loop candidate %d -> %d failed: %s", query_index, match_index, e.what());
+      } catch (...) {
+        ROS_ERROR("[rover] publishing loop candidate %d -> %d failed", query_index, match_index);
+      }
+    }
     core::Verdict v;
     std::string type = m.verifier_type;
     switch (m.mode) {

@@ -37,8 +37,8 @@ class LoopFusionAdapter {
 
   /// Reads the parameters from the node's private namespace (~verifier_type, ~verifier_name,
   /// ~fallback_to_accept_all, ~verdict_log, ~marker_frame, ~publish_markers and the plugin's
-  /// ~<verifier_name>/...), loads the verifier plugin and advertises ~loop_verdicts and
-  /// ~loop_markers. Call once, after ros::init (loop_fusion: in setIMUFlag).
+  /// ~<verifier_name>/...), loads the verifier plugin and advertises ~loop_verdicts,
+  /// ~loop_markers and ~loop_candidates. Call once, after ros::init (loop_fusion: in setIMUFlag).
   /// use_imu: loop_fusion's 4-DoF (true) or 6-DoF (false) pose graph.
   /// Returns true when the configured verifier runs, false in fallback mode (every loop
   /// accepted). If the verifier cannot start and the fallback is off, the process stops
@@ -59,7 +59,9 @@ class LoopFusionAdapter {
                    const Eigen::Matrix3d& R);
 
   /// Verifies a loop candidate that passed findConnection; commits it when accepted and
-  /// publishes the verdict. Returns true iff loop_fusion may use the loop; false: set
+  /// publishes the verdict. The candidate itself is published on ~loop_candidates first
+  /// (rover_loop_fusion/LoopCandidate, keyframes named by stamp) so that a recorded run can be
+  /// replayed through rover_verifier_node. Returns true iff loop_fusion may use the loop; false: set
   /// has_loop = false and skip it. inliers: the PnP inlier count, -1 if unknown.
   bool verifyLoop(int query_index, int match_index, const LoopInfo& loop_info, int inliers = -1);
 

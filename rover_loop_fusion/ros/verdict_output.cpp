@@ -4,6 +4,7 @@
 
 #include <visualization_msgs/MarkerArray.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -23,6 +24,15 @@ geometry_msgs::Point point(const Eigen::Vector3d& p) {
 }
 
 }  // namespace
+
+bool findTrajectoryPosition(const std::vector<core::TrajectoryPoint>& trajectory, int64_t index,
+                            Eigen::Vector3d* position) {
+  auto it = std::lower_bound(trajectory.begin(), trajectory.end(), index,
+                             [](const core::TrajectoryPoint& p, int64_t i) { return p.index < i; });
+  if (it == trajectory.end() || it->index != index) return false;
+  *position = it->estimate.t;
+  return true;
+}
 
 LoopVerdict toMsg(const core::Verdict& v, const VerdictContext& ctx, const std::string& frame_id) {
   LoopVerdict m;

@@ -4,6 +4,7 @@
 
 #include "rover_loop_fusion/LoopVerdict.h"
 #include "rover_loop_fusion/core/types.h"
+#include "rover_loop_fusion/core/verifier.h"
 
 #include <Eigen/Core>
 #include <ros/node_handle.h>
@@ -11,6 +12,7 @@
 
 #include <cstdio>
 #include <string>
+#include <vector>
 
 namespace rover_loop_fusion {
 
@@ -24,6 +26,11 @@ struct VerdictContext {
   Eigen::Vector3d query_position = Eigen::Vector3d::Zero();
   Eigen::Vector3d match_position = Eigen::Vector3d::Zero();
 };
+
+/// The estimated position of keyframe `index` in a trajectory ordered by index (as
+/// LoopVerifier::trajectory() returns it); false if the trajectory does not have it.
+bool findTrajectoryPosition(const std::vector<core::TrajectoryPoint>& trajectory, int64_t index,
+                            Eigen::Vector3d* position);
 
 LoopVerdict toMsg(const core::Verdict& v, const VerdictContext& ctx, const std::string& frame_id);
 

@@ -7,6 +7,7 @@
 // FakePoseGraph below is PoseGraph::addKeyFrame / loadKeyFrame / setIMUFlag of loop_fusion
 // reduced to the state the patch touches (has_loop, earliest_loop_index, the sequence shift
 // w_r_vio / w_t_vio, optimize_buf), with the adapter calls exactly where the patch makes them.
+#include "rover_loop_fusion/LoopCandidate.h"
 #include "rover_loop_fusion/LoopVerdict.h"
 #include "rover_loop_fusion/core/verdict_csv.h"
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
@@ -15,6 +16,7 @@
 #include "rover_loop_fusion/sim/scene.h"
 
 #include <gtest/gtest.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <visualization_msgs/MarkerArray.h>
 
@@ -777,6 +779,121 @@ TEST_F(Adapter, BadCandidatesAreRejectedNotThrown) {
   pg.rover.addKeyframe(3, 0.5, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());  // stamp goes back
   pg.rover.addKeyframe(4, 9.0, 1, Eigen::Vector3d::Constant(nan), Eigen::Matrix3d::Identity());
   EXPECT_FALSE(pg.rover.verifyLoop(4, 0, (LoopInfo() << 0, 0, 0, 1, 0, 0, 0, 0).finished()));
+}
+
+// ---- ~loop_candidates: what a recorded run replays through rover_verifier_node --------------
+
+namespace {
+
+/// Subscribes to ~loop_candidates on its own callback queue, so that it can be spun from
+/// inside a verifier's verify().
+class CandidateSpy {
+ public:
+  CandidateSpy() : nh_("~") {
+    nh_.setCallbackQueue(&queue_);
+    sub_ = nh_.subscribe("loop_candidates", 100, &CandidateSpy::on, this);
+  }
+  /// Spins until n candidates arrived (bounded, no timing asserted).
+  bool waitFor(size_t n) {
+    const ros::WallTime give_up = ros::WallTime::now() + ros::WallDuration(30.0);
+    while (msgs.size() < n && ros::WallTime::now() < give_up && ros::ok()) queue_.callAvailable(ros::WallDuration(0.01));
+    return msgs.size() >= n;
+  }
+  bool connected() {
+    const ros::WallTime give_up = ros::WallTime::now() + ros::WallDuration(30.0);
+    while (sub_.getNumPublishers() == 0 && ros::WallTime::now() < give_up) ros::WallDuration(0.01).sleep();
+    return sub_.getNumPublishers() > 0;
+  }
+  std::vector<LoopCandidate> msgs;
+
+ private:
+  void on(const LoopCandidate& m) { msgs.push_back(m); }
+  ros::CallbackQueue queue_;
+  ros::NodeHandle nh_;
+  ros::Subscriber sub_;
+};
+
+/// Accepts every candidate; records whether its ~loop_candidates message had arrived by the
+/// time verify() was called.
+class SpyVerifier : public LoopVerifier {
+ public:
+  explicit SpyVerifier(CandidateSpy* spy) : spy_(spy) {}
+  core::Status addKeyframe(int64_t, double, int, const Eigen::Vector3d&, const Eigen::Quaterniond&) override {
+    return core::Status::Ok();
+  }
+  core::Verdict verify(const core::LoopCandidate& c) override {
+    published_before_verify.push_back(spy_->waitFor(++verified_));
+    core::Verdict v;
+    v.query_index = c.query_index;
+    v.match_index = c.match_index;
+    v.accepted = true;
+    v.reason = core::Reason::kAccepted;
+    return v;
+  }
+  core::Status commit(const core::LoopCandidate&) override { return core::Status::Ok(); }
+  std::vector<bool> published_before_verify;
+
+ protected:
+  bool onInitialize() override { return true; }
+
+ private:
+  CandidateSpy* spy_;
+  size_t verified_ = 0;
+};
+
+}  // namespace
+
+TEST_F(Adapter, EveryCandidateIsPublishedBeforeItIsVerified) {
+  CandidateSpy spy;
+  SpyVerifier* verifier = new SpyVerifier(&spy);
+  LoopFusionAdapter rover;
+  ASSERT_TRUE(rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(verifier), "test/Spy"));
+  ASSERT_TRUE(spy.connected());
+  rover.addKeyframe(7, 1403636579.763555527, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());
+  rover.addKeyframe(8, 1403636580.5, 1, Eigen::Vector3d(1, 0, 0), Eigen::Matrix3d::Identity());
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(10.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()));
+  LoopInfo info;
+  info << 0.5, -0.25, 0.125, q.w(), q.x(), q.y(), q.z(), 10.0;  // yaw in degrees
+  EXPECT_TRUE(rover.verifyLoop(8, 7, info, 33));
+  EXPECT_TRUE(rover.verifyLoop(8, 99, info));  // unknown match: published all the same
+  EXPECT_EQ(verifier->published_before_verify, (std::vector<bool>{true, true}));
+  ASSERT_EQ(spy.msgs.size(), 2u);
+  const LoopCandidate& m = spy.msgs[0];
+  // Named by stamp, as rover_verifier_node numbers keyframe poses itself.
+  EXPECT_EQ(m.query_index, -1);
+  EXPECT_EQ(m.match_index, -1);
+  EXPECT_NEAR(m.query_stamp.toSec(), 1403636580.5, 1e-6);
+  EXPECT_NEAR(m.match_stamp.toSec(), 1403636579.763555527, 1e-6);
+  EXPECT_EQ(m.header.stamp, m.query_stamp);
+  EXPECT_EQ(m.header.frame_id, "world");
+  EXPECT_DOUBLE_EQ(m.relative_pose.position.x, 0.5);
+  EXPECT_DOUBLE_EQ(m.relative_pose.position.y, -0.25);
+  EXPECT_DOUBLE_EQ(m.relative_pose.position.z, 0.125);
+  EXPECT_DOUBLE_EQ(m.relative_pose.orientation.w, q.w());
+  EXPECT_DOUBLE_EQ(m.relative_pose.orientation.z, q.z());
+  EXPECT_NEAR(m.relative_yaw, 10.0 * M_PI / 180.0, 1e-12);  // radians in the message
+  EXPECT_EQ(m.inliers, 33);
+  EXPECT_EQ(spy.msgs[1].match_stamp, ros::Time());  // no such keyframe: stamp 0
+}
+
+TEST_F(Adapter, CandidatesArePublishedWithTheRealPluginAndInFallbackToo) {
+  // The default plugin, and the fallback when the plugin cannot start: every candidate the
+  // adapter sees is published, whatever happens to it.
+  for (bool fallback : {false, true}) {
+    SCOPED_TRACE(fallback ? "fallback" : "rover");
+    if (fallback) {
+      ros::param::set("~verifier_type", "rover_loop_fusion/NoSuchVerifier");
+      ros::param::set("~fallback_to_accept_all", true);
+    }
+    CandidateSpy spy;
+    FakePoseGraph pg;
+    EXPECT_EQ(pg.setIMUFlag(true), !fallback);
+    ASSERT_TRUE(spy.connected());
+    oneLoop(pg.rover);  // keyframes at stamps 1.0 and 2.0, a loop between them
+    ASSERT_TRUE(spy.waitFor(1));
+    EXPECT_NEAR(spy.msgs[0].query_stamp.toSec(), 2.0, 1e-9);
+    EXPECT_NEAR(spy.msgs[0].match_stamp.toSec(), 1.0, 1e-9);
+  }
 }
 
 // ---- the shipped YAMLs through the parameter server ----------------------------------------

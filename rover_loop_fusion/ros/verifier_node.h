@@ -1,0 +1,125 @@
+// rover_verifier_node: the loop verifier fed from topics, for bag replay, the demo and the
+// regression tests, without VINS-Fusion.
+//
+// Input: keyframe VIO poses (nav_msgs/Odometry, as /vins_estimator/keyframe_pose publishes
+// them: raw per-session VIO poses) and loop candidates (rover_loop_fusion/LoopCandidate, as the
+// patched loop_fusion publishes them on /loop_fusion/loop_candidates). Keyframes are numbered
+// in arrival order (0, 1, ...); candidates name their keyframes by stamp (index -1) or by that
+// number.
+//
+// Output (private topics): ~loop_verdicts, ~loop_markers (and the optional CSV log) as the
+// patched loop_fusion publishes them; ~pose_graph_path, what loop_fusion's optimisation makes
+// of the keyframes and the loops this node accepted (the verified trajectory; with the
+// accept-all plugin: upstream loop_fusion's); ~odometry_path (the VIO keyframe poses) and
+// ~estimate_path (the verifier's own estimate; empty if it keeps none). The paths are latched
+// and refreshed every ~optimize_period seconds (if something changed) and by the ~optimize
+// service (rover_loop_fusion/Optimize), which also returns them.
+//
+// Robustness: a candidate that arrives before its keyframes waits up to ~candidate_timeout
+// seconds; then, or when it names keyframes that never came or were refused, it gets an
+// invalid_input verdict with a ROS_WARN. Malformed keyframes (NaN, non-unit quaternion,
+// duplicate or out-of-order stamps) are refused with a ROS_WARN. Nothing a message contains
+// stops the node.
+#pragma once
+
+#include "rover_loop_fusion/LoopCandidate.h"
+#include "rover_loop_fusion/Optimize.h"
+#include "rover_loop_fusion/core/verifier.h"
+#include "rover_loop_fusion/ros/verdict_output.h"
+#include "rover_loop_fusion/ros/verifier_loader.h"
+
+#include <nav_msgs/Odometry.h>
+#include <ros/ros.h>
+
+#include <deque>
+#include <map>
+#include <memory>
+#include <string>
+
+namespace rover_loop_fusion {
+
+/// The node's own parameters (private namespace); the plugin reads ~<verifier_name>/...
+struct VerifierNodeParams {
+  std::string verifier_type = kTrajectoryPriorVerifierType;  ///< or rover / accept_all
+  std::string verifier_name = "rover";
+  std::string keyframe_topic = "/vins_estimator/keyframe_pose";
+  std::string candidate_topic = "/loop_fusion/loop_candidates";
+  int sequence = 1;                ///< loop_fusion sequence of every keyframe received
+  bool use_imu = true;             ///< 4-DoF (VIO) or 6-DoF (VO) pose graph, as loop_fusion's flag
+  double candidate_timeout = 2.0;  ///< [s, wall clock] a candidate waits for its keyframes
+  double stamp_tolerance = 1e-3;   ///< [s] a candidate's stamp names the nearest keyframe within it
+  double optimize_period = 2.0;    ///< [s, wall clock] loop_fusion-like optimisation; <= 0: on ~optimize only
+  int optimize_iterations = 5;     ///< loop_fusion's optimize4DoF: 5
+  std::string frame_id = "world";  ///< frame of verdicts, markers and paths
+  bool publish_markers = true;
+  std::string verdict_log;         ///< CSV file every verdict is appended to; empty: off
+  int queue_size = 10000;          ///< subscriber queues: a bag played fast must not drop messages
+};
+
+class VerifierNode {
+ public:
+  /// nh: where the input topics are resolved; pnh: the private namespace (parameters, outputs).
+  VerifierNode(const ros::NodeHandle& nh, const ros::NodeHandle& pnh);
+  ~VerifierNode();
+
+  /// Reads the parameters, loads and initialises the plugin, advertises and subscribes.
+  /// false with *error naming the parameter when the node cannot run.
+  bool start(std::string* error);
+
+  /// Gives every candidate still waiting an invalid_input verdict (call before shutdown).
+  void finish();
+
+  size_t verdictCount() const { return output_.published(); }
+
+ private:
+  struct KeyframeRef;
+  struct Pending {
+    LoopCandidate msg;
+    ros::WallTime received;
+  };
+  enum class Resolution { kFound, kWait, kInvalid };
+
+  void onKeyframe(const nav_msgs::Odometry::ConstPtr& msg);
+  void onCandidate(const LoopCandidate::ConstPtr& msg);
+  bool onOptimize(Optimize::Request& req, Optimize::Response& res);
+  void onPendingTimer(const ros::WallTimerEvent&);
+  void onOptimizeTimer(const ros::WallTimerEvent&);
+
+  void addKeyframe(const nav_msgs::Odometry& msg);
+  /// Decides every waiting candidate that can be decided; with timeout, also those that
+  /// waited too long.
+  void processPending(bool check_timeout);
+  Resolution resolve(int64_t index, const ros::Time& stamp, const char* role, int64_t* found,
+                     std::string* why) const;
+  void verify(const LoopCandidate& msg, int64_t query, int64_t match);
+  void reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why);
+  void publishVerdict(const core::Verdict& v, const LoopCandidate& msg);
+  /// Runs loop_fusion's optimisation on the graph and publishes the paths (into *out too).
+  void optimizeAndPublish(Optimize::Response* out);
+
+  ros::NodeHandle nh_, pnh_;
+  VerifierNodeParams params_;
+  std::string verifier_type_;
+  VerifierPtr verifier_;
+  /// loop_fusion's pose graph: every keyframe and the loops this node accepted, whatever the
+  /// plugin; solved like loop_fusion (solveLikeLoopFusion) for ~pose_graph_path.
+  std::unique_ptr<core::Verifier> graph_;
+  VerdictOutput output_;
+  ros::Subscriber keyframe_sub_, candidate_sub_;
+  ros::Publisher odometry_path_pub_, pose_graph_path_pub_, estimate_path_pub_;
+  ros::ServiceServer optimize_srv_;
+  ros::WallTimer pending_timer_, optimize_timer_;
+
+  int64_t next_index_ = 0;              // number of the next keyframe message
+  std::map<int64_t, int64_t> by_stamp_;  // stamp [ns] -> index, keyframes in the graph
+  std::map<int64_t, int64_t> stamp_of_;  // index -> stamp [ns], keyframes in the graph
+  std::map<int64_t, std::string> refused_by_index_;  // keyframe messages that were refused
+  std::map<int64_t, std::string> refused_by_stamp_;  // (stamps no graph keyframe has)
+  bool have_keyframe_ = false;
+  int64_t newest_stamp_ns_ = 0;  // newest stamp of a keyframe in the graph
+  std::deque<Pending> pending_;
+  bool changed_ = false;  // keyframes or loops since the last optimisation
+  size_t keyframes_refused_ = 0;
+};
+
+}  // namespace rover_loop_fusion

@@ -1,0 +1,302 @@
+"""Plays a scenario bag into rover_verifier_node instances and scores what they did.
+
+The player (play()) publishes the bag's keyframe poses and loop candidates like rosbag play,
+with two differences that make a replay deterministic whatever the machine's load:
+  - it starts once every verifier node is connected to both topics (rosbag play's
+    --wait-for-subscribers waits for one subscriber);
+  - before each keyframe it waits until every node has given a verdict on every candidate
+    that could be decided so far, so that each candidate is verified against the keyframes
+    up to its query keyframe, as loop_fusion does (rosbag play at a fixed rate can run ahead
+    of a busy node). A candidate published before its keyframe still waits in the node.
+Afterwards it calls each node's ~optimize service for the final trajectories.
+
+Scoring (score()): verdicts against the labels of the scenario directory next to the bag and
+the ATE (SE(3)-aligned position RMSE, Umeyama) of the odometry, of loop_fusion's optimisation
+with the loops each node accepted and of the verifier's own estimate against the ground truth.
+
+Needs rospy and the package's generated messages (source devel/setup.bash)."""
+import collections
+import os
+import threading
+import time
+
+import numpy as np
+
+from . import bag as rbag
+from . import scenario as rscenario
+
+
+class ReplayError(RuntimeError):
+    pass
+
+
+class VerifierClient:
+    """One rover_verifier_node: its verdicts and its ~optimize service."""
+
+    def __init__(self, node):
+        import rospy
+        from rover_loop_fusion.msg import LoopVerdict
+        self.node = node.rstrip("/")
+        self.verdicts = []
+        self.result = None  # the Optimize response after play()
+        self._cond = threading.Condition()
+        self._sub = rospy.Subscriber(self.node + "/loop_verdicts", LoopVerdict, self._on_verdict,
+                                     queue_size=100000)
+
+    def _on_verdict(self, msg):
+        with self._cond:
+            self.verdicts.append(msg)
+            self._cond.notify_all()
+
+    def wait_verdicts(self, n, timeout):
+        """Waits until at least n verdicts arrived; False on timeout."""
+        import rospy
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while len(self.verdicts) < n:
+                left = deadline - time.monotonic()
+                if left <= 0 or rospy.is_shutdown():
+                    return False
+                self._cond.wait(min(left, 0.5))
+        return True
+
+    def connected(self):
+        return self._sub.get_num_connections() > 0
+
+    def optimize(self, keyframe_messages, timeout=60.0):
+        """Calls ~optimize until the node has received every keyframe message published."""
+        import rospy
+        from rover_loop_fusion.srv import Optimize
+        name = self.node + "/optimize"
+        try:
+            rospy.wait_for_service(name, timeout)
+        except rospy.ROSException as e:
+            raise ReplayError(f"{name}: {e}")
+        call = rospy.ServiceProxy(name, Optimize)
+        deadline = time.monotonic() + timeout
+        while True:
+            r = call()
+            if r.keyframe_messages >= keyframe_messages or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        if r.keyframe_messages < keyframe_messages:
+            raise ReplayError(f"{self.node} received {r.keyframe_messages} of {keyframe_messages} keyframe messages")
+        self.result = r
+        return r
+
+
+class _Decidable:
+    """Mirrors rover_verifier_node's rule: a candidate is decided as soon as its query keyframe
+    has arrived (by arrival number) or its query stamp is not newer than the newest keyframe."""
+
+    def __init__(self, tolerance):
+        self.tol_us = int(round(tolerance * 1e6))
+        self.count = 0
+        self.newest = None
+
+    def keyframe(self, msg):
+        self.count += 1
+        k = rbag.stamp_key(msg.header.stamp)
+        self.newest = k if self.newest is None else max(self.newest, k)
+
+    def __call__(self, msg):
+        if msg.query_index >= 0:
+            return msg.query_index < self.count
+        return self.newest is not None and rbag.stamp_key(msg.query_stamp) <= self.newest + self.tol_us
+
+
+def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, final_timeout=60.0,
+         stamp_tolerance=1e-3, keyframe_topic=None, candidate_topic=None, progress=None):
+    """Publishes the bag's keyframe poses and candidates into the nodes of `clients`.
+
+    rate > 0: also paced at `rate` x the bag's time (for watching in rviz); 0: as fast as the
+    nodes verify. keyframe_topic / candidate_topic: publish there instead of the bag's topics.
+    Returns (keyframe messages, candidate messages) published. Raises ReplayError when a node
+    does not connect or stops answering."""
+    import rospy
+    from nav_msgs.msg import Odometry
+    from rover_loop_fusion.msg import LoopCandidate
+    messages = rbag.read_bag(bag_path)
+    pubs = {}
+    plan = []
+    for t, topic, msg in messages:
+        if msg._type == "nav_msgs/Odometry":
+            kind, cls, topic = "kf", Odometry, keyframe_topic or topic
+        elif msg._type == "rover_loop_fusion/LoopCandidate":
+            kind, cls, topic = "cand", LoopCandidate, candidate_topic or topic
+        else:
+            continue  # a recorded run holds other topics too
+        if topic not in pubs:
+            pubs[topic] = rospy.Publisher(topic, cls, queue_size=100000)
+        plan.append((t, kind, pubs[topic], msg))
+    if not plan:
+        raise ReplayError(f"{bag_path}: no keyframe poses or loop candidates")
+
+    deadline = time.monotonic() + connect_timeout
+    while not all(p.get_num_connections() >= len(clients) for p in pubs.values()) or \
+            not all(c.connected() for c in clients):
+        if time.monotonic() > deadline or rospy.is_shutdown():
+            raise ReplayError("the verifier nodes did not subscribe to " + ", ".join(sorted(pubs)) +
+                              f" within {connect_timeout:.0f} s")
+        time.sleep(0.05)
+
+    decidable = _Decidable(stamp_tolerance)
+    waiting = collections.deque()  # candidates published before they could be decided
+    n_kf = n_decidable = n_cand = 0
+    start_wall, start_bag = time.monotonic(), plan[0][0].to_sec()
+    for t, kind, pub, msg in plan:
+        if rospy.is_shutdown():
+            raise ReplayError("shut down")
+        if rate > 0:
+            delay = (t.to_sec() - start_bag) / rate - (time.monotonic() - start_wall)
+            if delay > 0:
+                time.sleep(delay)
+        if kind == "kf":
+            for c in clients:
+                if not c.wait_verdicts(n_decidable, step_timeout):
+                    raise ReplayError(f"{c.node}: {len(c.verdicts)} verdicts on {n_decidable} decidable "
+                                      f"candidates after {step_timeout:.0f} s")
+            pub.publish(msg)
+            n_kf += 1
+            decidable.keyframe(msg)
+            for _ in range(len(waiting)):
+                m = waiting.popleft()
+                if decidable(m):
+                    n_decidable += 1
+                else:
+                    waiting.append(m)
+            if progress and n_kf % 100 == 0:
+                progress(n_kf, n_cand)
+        else:
+            pub.publish(msg)
+            n_cand += 1
+            if decidable(msg):
+                n_decidable += 1
+            else:
+                waiting.append(msg)
+    for c in clients:
+        if not c.wait_verdicts(n_cand, final_timeout):
+            raise ReplayError(f"{c.node}: {len(c.verdicts)} verdicts on {n_cand} candidates after "
+                              f"{final_timeout:.0f} s")
+    for c in clients:
+        c.optimize(n_kf)
+    return n_kf, n_cand
+
+
+# ---- scoring ----------------------------------------------------------------------------------
+
+def load_labels(scenario_dir):
+    """(labels, truth): labels[(query key, match key)] = 1 / 0 / -1 for each candidate of
+    candidates.csv, truth[stamp key] = 4x4 ground-truth pose (empty without groundtruth.csv).
+    Keys: bag.stamp_key of the keyframes' stamps."""
+    s = rscenario.read(scenario_dir)
+    stamp = {k.index: k.stamp for k in s.keyframes}
+    labels = {}
+    for c in s.candidates:
+        if c.query in stamp and c.match in stamp:
+            labels[(rbag.stamp_key(stamp[c.query]), rbag.stamp_key(stamp[c.match]))] = c.label
+    truth = {}
+    if s.truth is not None:
+        for k, T in zip(s.keyframes, s.truth):
+            if T is not None:
+                truth[rbag.stamp_key(k.stamp)] = T
+    return labels, truth
+
+
+def verdict_key(v):
+    return rbag.stamp_key(v.query_stamp), rbag.stamp_key(v.match_stamp)
+
+
+def umeyama_se3(A, B):
+    """R, t minimising |R A + t - B| (3xN positions)."""
+    ma, mb = A.mean(axis=1, keepdims=True), B.mean(axis=1, keepdims=True)
+    U, _, Vt = np.linalg.svd((B - mb) @ (A - ma).T)
+    D = np.eye(3)
+    D[2, 2] = np.sign(np.linalg.det(U @ Vt)) or 1.0
+    R = U @ D @ Vt
+    return R, mb - R @ ma
+
+
+def ate(path, truth):
+    """SE(3)-aligned position RMSE [m] of a nav_msgs/Path against truth (by stamp); NaN if
+    fewer than 3 poses match."""
+    est, ref = [], []
+    for p in path.poses:
+        T = truth.get(rbag.stamp_key(p.header.stamp))
+        if T is not None:
+            est.append([p.pose.position.x, p.pose.position.y, p.pose.position.z])
+            ref.append(T[:3, 3])
+    if len(est) < 3:
+        return float("nan")
+    A, B = np.array(est).T, np.array(ref).T
+    R, t = umeyama_se3(A, B)
+    return float(np.sqrt(np.mean(np.sum((R @ A + t - B) ** 2, axis=0))))
+
+
+Score = collections.namedtuple("Score", "candidates accepted rejected tp fp tn fn unlabelled precision recall "
+                                        "reasons threshold verifier ate_odometry ate_pose_graph ate_estimate")
+
+
+def score(client, labels, truth):
+    tp = fp = tn = fn = unlabelled = 0
+    reasons = collections.Counter()
+    thresholds = set()
+    for v in client.verdicts:
+        reasons[v.reason] += 1
+        if np.isfinite(v.threshold):
+            thresholds.add(round(v.threshold, 6))
+        label = labels.get(verdict_key(v), -1)
+        if label == 1:
+            tp += v.accepted
+            fn += not v.accepted
+        elif label == 0:
+            fp += v.accepted
+            tn += not v.accepted
+        else:
+            unlabelled += 1
+    accepted = sum(v.accepted for v in client.verdicts)
+    r = client.result
+    return Score(len(client.verdicts), accepted, len(client.verdicts) - accepted, tp, fp, tn, fn, unlabelled,
+                 tp / (tp + fp) if tp + fp else float("nan"), tp / (tp + fn) if tp + fn else float("nan"),
+                 dict(reasons), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
+                 ate(r.odometry, truth) if r else float("nan"), ate(r.pose_graph, truth) if r else float("nan"),
+                 ate(r.estimate, truth) if r and r.estimate.poses else float("nan"))
+
+
+def verdict_line(v, label):
+    lab = {1: "true ", 0: "false"}.get(label, "  ?  ")
+    score_text = f"{v.score:6.3f} m" if np.isfinite(v.score) else "       -"
+    return (f"  {v.query_index:5d} -> {v.match_index:5d}  {lab}  {'ACCEPT' if v.accepted else 'reject'}  "
+            f"{v.reason:<22s} score {score_text}  {v.elapsed_ms:6.2f} ms")
+
+
+def summary_text(verified, accept_all=None):
+    """The demo's summary: the verifying node's verdicts and the ATE of every trajectory."""
+    s = verified
+    thr = ", ".join(f"{t:g}" for t in s.threshold) or "-"
+    lines = [
+        f"summary: {s.candidates} candidates ({s.tp + s.fn} true, {s.fp + s.tn} false"
+        + (f", {s.unlabelled} unlabelled" if s.unlabelled else "") + f"): accepted {s.accepted}, rejected {s.rejected}",
+        f"  true positives {s.tp}, false positives {s.fp}, true negatives {s.tn}, false negatives {s.fn}",
+        f"  precision {s.precision:.3f}, recall {s.recall:.3f} (threshold {thr} m)",
+    ]
+    if np.isfinite(s.ate_odometry):
+        ates = [f"odometry {s.ate_odometry:.3f}"]
+        if accept_all is not None:
+            ates.append(f"accept-all (loop_fusion) {accept_all.ate_pose_graph:.3f}")
+        ates.append(f"verified (loop_fusion) {s.ate_pose_graph:.3f}")
+        if np.isfinite(s.ate_estimate):
+            ates.append(f"verifier estimate {s.ate_estimate:.3f}")
+        lines.append("  ATE [m]: " + " | ".join(ates))
+    else:
+        lines.append("  ATE: no ground truth (groundtruth.csv) for these keyframes")
+    if accept_all is not None:
+        lines.append(f"  accept-all: accepted {accept_all.accepted} of {accept_all.candidates} "
+                     f"(false positives {accept_all.fp}, precision {accept_all.precision:.3f})")
+    return "\n".join(lines)
+
+
+def default_labels_dir(bag_path):
+    """The scenario directory of a bag: the directory it is in, if it holds candidates.csv."""
+    d = os.path.dirname(os.path.abspath(bag_path))
+    return d if os.path.exists(os.path.join(d, "candidates.csv")) else ""
