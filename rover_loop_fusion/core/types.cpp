@@ -14,6 +14,7 @@ const char* toString(Reason reason) {
     case Reason::kNoTrajectoryPrior: return "no_trajectory_prior";
     case Reason::kInvalidInput: return "invalid_input";
     case Reason::kTimeBudgetExceeded: return "time_budget_exceeded";
+    case Reason::kInnovationAboveBound: return "innovation_above_bound";
   }
   return "invalid_input";
 }
@@ -64,6 +65,9 @@ std::string VerifierConfig::validate() const {
   if (!(std::isfinite(threshold_per_metre) && threshold_per_metre >= 0))
     e << "threshold_per_metre must be >= 0 (got " << threshold_per_metre << "); ";
   if (!std::isfinite(max_threshold)) e << "max_threshold must be finite; ";
+  if (!std::isfinite(max_innovation)) e << "max_innovation must be finite; ";
+  if (!(std::isfinite(max_innovation_per_metre) && max_innovation_per_metre >= 0))
+    e << "max_innovation_per_metre must be >= 0 (got " << max_innovation_per_metre << "); ";
   if (max_iterations < 1) e << "max_iterations must be >= 1 (got " << max_iterations << "); ";
   if (!std::isfinite(time_budget_ms)) e << "time_budget_ms must be finite; ";
   if (odometry_neighbours < 1)

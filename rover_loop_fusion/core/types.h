@@ -31,6 +31,8 @@ enum class Reason {
   kNoTrajectoryPrior,    ///< query and match are in sequences nothing connects yet
   kInvalidInput,         ///< the candidate or the graph state is not usable
   kTimeBudgetExceeded,   ///< the solve ran past config.time_budget_ms
+  kInnovationAboveBound, ///< the candidate disagrees with the estimate by more than the drift
+                         ///< over the path between the two keyframes can explain (no solve)
 };
 
 /// snake_case name used in messages, logs and CSV ("score_above_threshold", ...).
@@ -112,6 +114,14 @@ struct VerifierConfig {
   double threshold_per_metre = 0.0;
   /// Upper bound of the effective threshold [m] (<= 0: none).
   double max_threshold = 0.0;
+  /// Innovation gate, checked before the trial solve: reject when the candidate puts the query
+  /// keyframe farther from the current estimate than
+  ///   max_innovation + max_innovation_per_metre * path_length   [m]
+  /// (a drift rate over the odometry path from match to query through the graph). It catches
+  /// what a diluted score misses: a look-alike next to places the graph already ties together
+  /// (innovation ~ offset, path ~ metres). max_innovation <= 0 disables the gate.
+  double max_innovation = 0.5;
+  double max_innovation_per_metre = 0.02;
   /// Policy for candidates between sequences that nothing connects yet (no prior to test
   /// against). true = accept as upstream loop_fusion does when merging maps.
   bool accept_without_prior = true;

@@ -557,6 +557,24 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     return finish(Reason::kInvalidInput, false,
                   "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
 
+  v.innovation = m.innovation(c, qpos, mpos);
+  v.path_length = m.pathLength(mpos, qpos);
+  if (config_.threshold_per_metre > 0 && std::isfinite(v.path_length)) {
+    v.threshold += config_.threshold_per_metre * v.path_length;
+    if (config_.max_threshold > 0) v.threshold = std::min(v.threshold, config_.max_threshold);
+  }
+  if (config_.max_innovation > 0 && std::isfinite(v.path_length)) {
+    const double bound = config_.max_innovation + config_.max_innovation_per_metre * v.path_length;
+    if (!(v.innovation <= bound)) {
+      std::ostringstream s;
+      s.precision(3);
+      s << std::fixed << "innovation " << v.innovation << " m > " << bound << " m ("
+        << config_.max_innovation << " m + " << config_.max_innovation_per_metre << " x "
+        << v.path_length << " m of path): more than drift can explain";
+      return finish(Reason::kInnovationAboveBound, false, s.str());
+    }
+  }
+
   Impl::Edge cand;
   cand.from = mpos;
   cand.to = qpos;
@@ -564,12 +582,6 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   Impl::Trial tr;
   m.buildTrial(tr, m.windowStart(mpos), m.root(qseq), false, &cand,
                config_.robust_candidate ? m.huber.get() : nullptr);
-  v.innovation = m.innovation(c, qpos, mpos);
-  v.path_length = m.pathLength(mpos, qpos);
-  if (config_.threshold_per_metre > 0 && std::isfinite(v.path_length)) {
-    v.threshold += config_.threshold_per_metre * v.path_length;
-    if (config_.max_threshold > 0) v.threshold = std::min(v.threshold, config_.max_threshold);
-  }
   const std::vector<State>& before = m.x;
   Impl::SolveOutcome o = m.solve(tr, config_.max_iterations, config_.time_budget_ms);
   v.iterations = o.iterations;

@@ -51,7 +51,7 @@ void ParamReader::wrongType(const std::string& key, const char* expected) {
 
 const std::vector<std::string>& verifierParameterNames() {
   static const std::vector<std::string> names = {
-      "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "accept_without_prior", "max_iterations",
+      "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "max_innovation", "max_innovation_per_metre", "accept_without_prior", "max_iterations",
       "time_budget_ms", "function_tolerance", "odometry_neighbours", "loop_huber",
       "robust_candidate", "window_margin", "max_relative_translation", "max_relative_yaw_deg",
       "quaternion_tolerance", "anchor_incoming_keyframes"};
@@ -75,6 +75,8 @@ ConfigLoad loadVerifierConfig(const ros::NodeHandle& nh, bool host_uses_imu) {
   r.number("threshold", &c.threshold);
   r.number("threshold_per_metre", &c.threshold_per_metre);
   r.number("max_threshold", &c.max_threshold);
+  r.number("max_innovation", &c.max_innovation);
+  r.number("max_innovation_per_metre", &c.max_innovation_per_metre);
   r.boolean("accept_without_prior", &c.accept_without_prior);
   r.integer("max_iterations", &c.max_iterations);
   r.number("time_budget_ms", &c.time_budget_ms);

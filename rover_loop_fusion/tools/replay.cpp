@@ -5,6 +5,7 @@
 //   rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]
 //                [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]
 //                [--threshold_per_metre K] [--max_threshold M]
+//                [--max_innovation M] [--max_innovation_per_metre K]  (0: no gate)
 //                [--window_margin N] [--time_budget_ms MS] [--robust_candidate] [--quiet]
 //
 // Protocols:
@@ -40,6 +41,7 @@ int usage(int code) {
                "usage: rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]\n"
                "                    [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]\n"
                "                    [--threshold_per_metre K] [--max_threshold M]\n"
+               "                    [--max_innovation M] [--max_innovation_per_metre K]\n"
                "                    [--window_margin N] [--time_budget_ms MS] [--robust_candidate]\n"
                "                    [--quiet]\n");
   return code;
@@ -86,6 +88,8 @@ int main(int argc, char** argv) {
     } else if (a == "--threshold") cfg.threshold = std::atof(value().c_str());
     else if (a == "--threshold_per_metre") cfg.threshold_per_metre = std::atof(value().c_str());
     else if (a == "--max_threshold") cfg.max_threshold = std::atof(value().c_str());
+    else if (a == "--max_innovation") cfg.max_innovation = std::atof(value().c_str());
+    else if (a == "--max_innovation_per_metre") cfg.max_innovation_per_metre = std::atof(value().c_str());
     else if (a == "--window_margin") cfg.window_margin = std::atoi(value().c_str());
     else if (a == "--time_budget_ms") cfg.time_budget_ms = std::atof(value().c_str());
     else if (a == "--robust_candidate") cfg.robust_candidate = true;

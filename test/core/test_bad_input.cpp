@@ -194,6 +194,7 @@ TEST(Reasons, HaveStableNames) {
   EXPECT_STREQ(toString(Reason::kNoTrajectoryPrior), "no_trajectory_prior");
   EXPECT_STREQ(toString(Reason::kInvalidInput), "invalid_input");
   EXPECT_STREQ(toString(Reason::kTimeBudgetExceeded), "time_budget_exceeded");
+  EXPECT_STREQ(toString(Reason::kInnovationAboveBound), "innovation_above_bound");
   Mode m;
   EXPECT_TRUE(parseMode("6dof", &m));
   EXPECT_EQ(m, Mode::kSixDof);

@@ -74,12 +74,15 @@ TEST(Verifier, TrueLoopScoresUnderThresholdAndLowersAte) {
 
 TEST(Verifier, FalseRepetitiveLoopScoresOverThreshold) {
   // A look-alike place 3 m away, matched with a plausible small relative pose.
+  // The deformation score itself (the innovation gate, which would reject these first, off).
+  core::VerifierConfig score_only;
+  score_only.max_innovation = 0.0;
   for (uint32_t seed : {7u, 8u, 9u}) {
     const sim::Scene s = corridor(seed);
     const sim::SimCandidate& c = first(s, false);
     ASSERT_NEAR(c.truth_distance, 3.0, 0.5);
     ASSERT_LT(c.candidate.relative_t.norm(), 1.5);
-    Verifier v;
+    Verifier v(score_only);
     addUpTo(v, s, c.candidate.query_index);
     const Verdict vd = v.verify(c.candidate);
     EXPECT_FALSE(vd.accepted) << "seed " << seed << ": " << vd.detail;
@@ -95,11 +98,16 @@ TEST(Verifier, FalseFloorLoopInParkingDeckIsRejected) {
   // not at the paper's 0.5 m (measured limit, README).
   const sim::Scene s = corridor(7, 3.0);
   const sim::SimCandidate& c = first(s, false);
-  Verifier v;
+  core::VerifierConfig score_only;
+  score_only.max_innovation = 0.0;
+  Verifier v(score_only);
   addUpTo(v, s, c.candidate.query_index);
   const Verdict vd = v.verify(c.candidate);
   EXPECT_FALSE(vd.accepted) << vd.detail;
   EXPECT_GT(vd.score, 0.3) << vd.detail;
+  Verifier defaults;  // with the gate as well: rejected
+  addUpTo(defaults, s, c.candidate.query_index);
+  EXPECT_FALSE(defaults.verify(c.candidate).accepted);
 }
 
 TEST(Verifier, VerdictReportsInnovationAndPathLength) {
@@ -138,10 +146,52 @@ TEST(Verifier, ThresholdGrowsWithPathLengthWhenAsked) {
   EXPECT_DOUBLE_EQ(vd.threshold, 0.4);  // ~60 m of path: capped
 }
 
+TEST(Verifier, InnovationGateRejectsLookAlikesNextToTiedPlacesWithoutSolving) {
+  // After the true loop of a revisit is in the graph, a look-alike 3 m away seen from the
+  // next keyframes contradicts the graph over a few metres of path: the gate rejects it
+  // before any solve. A true loop of the same revisit passes the gate and is scored.
+  const sim::Scene s = corridor();
+  const sim::SimCandidate& t = first(s, true);
+  Verifier v;
+  addUpTo(v, s, t.candidate.query_index);
+  ASSERT_TRUE(v.verify(t.candidate).accepted);
+  ASSERT_TRUE(v.commit(t.candidate).ok);
+  const int64_t q = t.candidate.query_index + 2;
+  addUpTo(v, s, q);
+  core::LoopCandidate lookalike = t.candidate;  // the keyframe 6 places (3 m) before the revisit
+  lookalike.query_index = q;
+  lookalike.match_index = t.candidate.match_index + 2 - 6;
+  lookalike.relative_t = sim::relative(s.keyframes[t.candidate.match_index + 2].truth, s.keyframes[q].truth).t;
+  const size_t solves = v.solveCount();
+  const Verdict vd = v.verify(lookalike);
+  EXPECT_FALSE(vd.accepted);
+  EXPECT_EQ(vd.reason, Reason::kInnovationAboveBound) << vd.detail;
+  EXPECT_GT(vd.innovation, 2.5);
+  EXPECT_LT(vd.path_length, 10.0);
+  EXPECT_EQ(v.solveCount(), solves) << "the gate decides without a trial solve";
+
+  core::LoopCandidate truth = t.candidate;
+  truth.query_index = q;
+  truth.match_index = t.candidate.match_index + 2;
+  truth.relative_t = lookalike.relative_t;
+  const Verdict vt = v.verify(truth);
+  EXPECT_TRUE(vt.accepted) << vt.detail;
+
+  core::VerifierConfig no_gate;
+  no_gate.max_innovation = 0.0;
+  Verifier w(no_gate);
+  addUpTo(w, s, t.candidate.query_index);
+  ASSERT_TRUE(w.commit(t.candidate).ok);
+  addUpTo(w, s, q);
+  EXPECT_NE(w.verify(lookalike).reason, Reason::kInnovationAboveBound);
+}
+
 TEST(Verifier, VerifyDoesNotChangeTheGraph) {
   const sim::Scene s = corridor();
   const sim::SimCandidate& c = first(s, false);
-  Verifier v;
+  core::VerifierConfig score_only;  // so that the trial solve runs
+  score_only.max_innovation = 0.0;
+  Verifier v(score_only);
   addUpTo(v, s, c.candidate.query_index);
   const std::vector<core::Pose> before = estimates(v);
   const Verdict a = v.verify(c.candidate);
@@ -296,6 +346,7 @@ TEST(Verifier, NoTrajectoryPriorBetweenUnconnectedSequences) {
   for (bool policy : {true, false}) {
     core::VerifierConfig cfg;
     cfg.accept_without_prior = policy;
+    cfg.anchor_incoming_keyframes = true;  // raw per-session poses, as the node hands them
     Verifier v(cfg);
     addUpTo(v, s, split - 1, 1);
     // Sequence 2 re-expressed in its own VIO frame: starts at the origin.
@@ -324,7 +375,8 @@ TEST(Verifier, NoTrajectoryPriorBetweenUnconnectedSequences) {
     next.match_index += 1;
     const Verdict vn = v.verify(next);
     EXPECT_NE(vn.reason, Reason::kNoTrajectoryPrior) << vn.detail;
-    EXPECT_TRUE(std::isfinite(vn.score));
+    EXPECT_TRUE(std::isfinite(vn.score)) << vn.detail;
+    EXPECT_LT(vn.innovation, 0.5) << "the anchored session continues in the map's frame";
   }
 }
 
@@ -361,6 +413,7 @@ TEST(Verifier, SolverLimitsFailClosed) {
   const sim::SimCandidate& c = first(s, false);
   {
     core::VerifierConfig cfg;
+    cfg.max_innovation = 0.0;  // reach the solver with a false candidate
     cfg.max_iterations = 1;
     Verifier v(cfg);
     addUpTo(v, s, c.candidate.query_index);
@@ -371,6 +424,7 @@ TEST(Verifier, SolverLimitsFailClosed) {
   }
   {
     core::VerifierConfig cfg;
+    cfg.max_innovation = 0.0;
     cfg.time_budget_ms = 1e-6;
     Verifier v(cfg);
     addUpTo(v, s, c.candidate.query_index);

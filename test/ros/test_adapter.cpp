@@ -329,12 +329,13 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
   EXPECT_EQ(rejected.query_index, picks[0]->candidate.query_index);
   EXPECT_EQ(rejected.match_index, picks[0]->candidate.match_index);
   EXPECT_FALSE(rejected.accepted);
-  EXPECT_EQ(rejected.reason, LoopVerdict::SCORE_ABOVE_THRESHOLD) << rejected.detail;
-  EXPECT_GT(rejected.score, 0.15);
+  // A look-alike 3 m away after one lap: the innovation gate of config/rover_indoor.yaml
+  // (0.5 m + 2 % of the path) rejects it before the trial solve.
+  EXPECT_EQ(rejected.reason, LoopVerdict::INNOVATION_ABOVE_BOUND) << rejected.detail;
   EXPECT_DOUBLE_EQ(rejected.threshold, 0.15);  // config/rover_indoor.yaml, fixed threshold
-  EXPECT_GT(rejected.innovation, 1.0);         // a look-alike 3 m away
+  EXPECT_GT(rejected.innovation, 0.5 + 0.02 * rejected.path_length);
   EXPECT_GT(rejected.path_length, 10.0);
-  EXPECT_TRUE(rejected.converged);
+  EXPECT_FALSE(rejected.converged);  // no trial solve
   EXPECT_EQ(rejected.verifier, kRover);
   EXPECT_EQ(rejected.inliers, -1);  // loop_fusion does not hand the PnP inlier count out
   EXPECT_EQ(rejected.header.frame_id, "world");
@@ -357,9 +358,11 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
     EXPECT_EQ(line.header.frame_id, "world");
     ASSERT_EQ(line.points.size(), 2u);
     EXPECT_EQ(text.type, Marker::TEXT_VIEW_FACING);
+    // the score, or the reason when there is none (decided by the innovation gate)
     char score[32];
     std::snprintf(score, sizeof(score), "%.2f m", listen.verdicts_[i].score);
-    EXPECT_TRUE(contains(text.text, score)) << text.text << " lacks " << score;
+    const std::string shown = std::isfinite(listen.verdicts_[i].score) ? score : listen.verdicts_[i].reason;
+    EXPECT_TRUE(contains(text.text, shown)) << text.text << " lacks " << shown;
     EXPECT_TRUE(contains(text.text, std::to_string(listen.verdicts_[i].query_index) + "->" +
                                         std::to_string(listen.verdicts_[i].match_index)))
         << text.text;
@@ -383,7 +386,7 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
   for (size_t i = 0; i < 2; ++i) {
     const LoopVerdict& v = listen.verdicts_[i];
     EXPECT_TRUE(contains(rows[i + 1], "," + std::to_string(v.query_index) + "," + std::to_string(v.match_index) +
-                                          (v.accepted ? ",1,accepted," : ",0,score_above_threshold,")))
+                                          (v.accepted ? ",1,accepted," : ",0," + v.reason + ",")))
         << rows[i + 1];
     // inliers (-1: loop_fusion does not hand them out), innovation, path_length, verifier
     EXPECT_TRUE(contains(rows[i + 1], std::string(",-1,"))) << rows[i + 1];

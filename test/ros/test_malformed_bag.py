@@ -86,7 +86,8 @@ class MalformedBag(unittest.TestCase):
             else:
                 self.assertEqual(e["expect"], "decided")
                 self.assertNotEqual(v.reason, "invalid_input", what)
-                self.assertTrue(v.converged, what)
+                if v.reason in ("accepted", "score_above_threshold"):  # decided by the trial solve
+                    self.assertTrue(v.converged, what)
                 self.assertGreaterEqual(v.query_index, 0, what)
 
     def test_waiting_candidates(self):
