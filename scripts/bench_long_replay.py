@@ -1,0 +1,189 @@
+#!/usr/bin/env python3
+"""Long replay: a simulated run of many keyframes played fast through rover_verifier_node.
+Reports whether every candidate got a verdict (none dropped), the node's memory over the run
+and the distribution of verification latency. A benchmark, not a test: it prints figures and
+writes results/long_replay/ (summary.txt, rss.csv, verdicts.csv).
+
+  bench_long_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 200]
+                       [--sigma 0.03] [--seed 3] [--optimize-period 0] [--out results/long_replay]
+
+The scene is the corridor loop (120 keyframes a lap, odometry noise --sigma: 0.03 is a good
+VIO, whose first loop is accepted; at 0.05 some seeds lose it, README "Measured limits") driven
+until --keyframes; candidates are
+verified as loop_fusion would produce them (the earliest matching keyframe), so their span
+grows with the run. The bag is played with `rosbag play -r RATE` (keyframes every 0.5 s in
+bag time: -r 200 is 400 keyframes a second), faster than the node verifies, so the node's
+queues and the candidate bookkeeping are exercised too. Needs the package built and sourced
+(scripts/demo.sh or scripts/test.sh do that); runs its own roscore on a free port."""
+import argparse
+import csv
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+ROOT = os.path.dirname(HERE)
+
+from roverlib import bag as rbag  # noqa: E402
+from roverlib import scenario, scenes  # noqa: E402
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def rss_mb(pid):
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return float("nan")
+
+
+def count_rows(path):
+    try:
+        with open(path) as f:
+            return max(0, sum(1 for _ in f) - 1)
+    except OSError:
+        return 0
+
+
+def percentile(values, q):
+    if not values:
+        return float("nan")
+    v = sorted(values)
+    return v[min(len(v) - 1, int(q * len(v)))]
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--keyframes", type=int, default=20000)
+    ap.add_argument("--true", dest="n_true", type=int, default=500)
+    ap.add_argument("--false", dest="n_false", type=int, default=500)
+    ap.add_argument("--rate", type=float, default=200.0, help="rosbag play -r")
+    ap.add_argument("--sigma", type=float, default=0.03, help="odometry noise level")
+    ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--optimize-period", type=float, default=0.0,
+                    help="node's loop_fusion-like optimisation period [s]; 0: only at the end")
+    ap.add_argument("--out", default=os.path.join(ROOT, "results", "long_replay"))
+    a = ap.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    scn_dir = os.path.join(a.out, "scenario")
+    log = os.path.join(a.out, "verdicts.csv")
+    if os.path.exists(log):
+        os.remove(log)
+
+    t0 = time.time()
+    laps = (a.keyframes + 119) // 120
+    s = scenes.make_scene("corridor", a.sigma, seed=a.seed, n_true=a.n_true, n_false=a.n_false, laps=laps)
+    s.keyframes = s.keyframes[:a.keyframes]
+    s.truth = s.truth[:a.keyframes]
+    s.candidates = [c for c in s.candidates if c.query < a.keyframes]
+    scenario.write(s, scn_dir)
+    bag_path = os.path.join(scn_dir, "scenario.bag")
+    rbag.write_bag(s, bag_path)
+    n_cand = len(s.candidates)
+    print(f"scenario: {len(s.keyframes)} keyframes, {n_cand} candidates "
+          f"({sum(c.label == 1 for c in s.candidates)} true), bag {os.path.getsize(bag_path) / 1e6:.1f} MB, "
+          f"made in {time.time() - t0:.0f} s", flush=True)
+
+    env = dict(os.environ, ROS_MASTER_URI=f"http://127.0.0.1:{free_port()}")
+    port = env["ROS_MASTER_URI"].rsplit(":", 1)[1]
+    procs = []
+    try:
+        core = subprocess.Popen(["roscore", "-p", port], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True)
+        procs.append(core)
+        time.sleep(3)
+        subprocess.run(["rosparam", "load", os.path.join(ROOT, "config", "rover_indoor.yaml"),
+                        "/rover_verifier/rover"], env=env, check=True)
+        node = subprocess.Popen(
+            ["rosrun", "rover_loop_fusion", "rover_verifier_node", "__name:=rover_verifier",
+             f"_verdict_log:={log}", f"_optimize_period:={a.optimize_period}", "_publish_markers:=false"],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+        procs.append(node)
+        time.sleep(3)
+        # rosrun execs the node: its PID is the process's own.
+        start = time.time()
+        play = subprocess.Popen(["rosbag", "play", "-q", "--wait-for-subscribers", "--queue=100000",
+                                 "-r", str(a.rate), bag_path], env=env,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        procs.append(play)
+        rss_rows = []
+        play_end = None
+        last_count, last_change = 0, time.time()
+        while True:
+            now = time.time()
+            done = count_rows(log)
+            rss_rows.append((now - start, done, rss_mb(node.pid)))
+            if play_end is None and play.poll() is not None:
+                play_end = now - start
+            if done != last_count:
+                last_count, last_change = done, now
+            if done >= n_cand or node.poll() is not None:
+                break
+            if play_end is not None and now - last_change > 120:
+                break  # nothing new for 2 minutes after the bag ended
+            time.sleep(0.5)
+        wall = time.time() - start
+        alive = node.poll() is None
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGINT)
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+
+    rows = list(csv.DictReader(open(log))) if os.path.exists(log) else []
+    lat = [float(r["elapsed_ms"]) for r in rows]
+    reasons = {}
+    for r in rows:
+        reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+    stamps = {k.index: k.stamp for k in s.keyframes}
+    by_stamp = {(round(stamps[c.query], 3), round(stamps[c.match], 3)): c.label for c in s.candidates}
+    fp = sum(1 for r in rows if r["accepted"] == "1" and
+             by_stamp.get((round(float(r["query_stamp"]), 3), round(float(r["match_stamp"]), 3))) == 0)
+    tp = sum(1 for r in rows if r["accepted"] == "1" and
+             by_stamp.get((round(float(r["query_stamp"]), 3), round(float(r["match_stamp"]), 3))) == 1)
+    rss = [r[2] for r in rss_rows if r[2] == r[2]]
+    with open(os.path.join(a.out, "rss.csv"), "w") as f:
+        f.write("seconds,verdicts,rss_mb\n")
+        for r in rss_rows:
+            f.write(f"{r[0]:.1f},{r[1]},{r[2]:.1f}\n")
+    # RSS when the first and the last quarter of verdicts were done: growth per keyframe played.
+    quarter = [r for r in rss_rows if r[1] >= n_cand // 4]
+    lines = [
+        f"long replay: corridor sigma {a.sigma:g} seed {a.seed}, {len(s.keyframes)} keyframes, {n_cand} candidates, rosbag play -r {a.rate:g} "
+        f"(bag {len(s.keyframes) * 0.5 / a.rate:.0f} s), node optimize_period {a.optimize_period:g} s",
+        f"  verdicts: {len(rows)} of {n_cand} candidates ({n_cand - len(rows)} dropped); node "
+        f"{'still running' if alive else 'EXITED'} after {wall:.0f} s",
+        f"  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
+        f"  accepted: {tp} true, {fp} false (labels)",
+        f"  verification latency [ms]: p50 {percentile(lat, .5):.2f}  p90 {percentile(lat, .9):.2f}  "
+        f"p99 {percentile(lat, .99):.2f}  max {max(lat) if lat else float('nan'):.2f}",
+        f"  node RSS [MB]: start {rss[0] if rss else float('nan'):.1f}, after a quarter of the verdicts "
+        f"{quarter[0][2] if quarter else float('nan'):.1f}, peak {max(rss) if rss else float('nan'):.1f}, "
+        f"end {rss[-1] if rss else float('nan'):.1f}",
+    ]
+    text = "\n".join(lines)
+    print(text)
+    with open(os.path.join(a.out, "summary.txt"), "w") as f:
+        f.write(text + "\n")
+    print(f"wrote {a.out}/summary.txt, rss.csv, verdicts.csv")
+    return 0 if len(rows) == n_cand and alive else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
