@@ -109,8 +109,8 @@ struct VerifierConfig {
   /// (accepted loops count zero): a true loop's score grows with the drift it corrects, and
   /// drift grows with the distance travelled since the places were last tied together.
   /// threshold_per_metre = 0 is a fixed threshold, as in the paper (0.5 indoor, 1.0
-  /// outdoor). The default 0.15 m is measured, not the paper's: docs/design-notes.md.
-  double threshold = 0.15;
+  /// outdoor). The default 0.2 m is measured, not the paper's: docs/design-notes.md.
+  double threshold = 0.2;
   double threshold_per_metre = 0.0;
   /// Upper bound of the effective threshold [m] (<= 0: none).
   double max_threshold = 0.0;

@@ -332,7 +332,7 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
   // A look-alike 3 m away after one lap: the innovation gate of config/rover_indoor.yaml
   // (0.5 m + 2 % of the path) rejects it before the trial solve.
   EXPECT_EQ(rejected.reason, LoopVerdict::INNOVATION_ABOVE_BOUND) << rejected.detail;
-  EXPECT_DOUBLE_EQ(rejected.threshold, 0.15);  // config/rover_indoor.yaml, fixed threshold
+  EXPECT_DOUBLE_EQ(rejected.threshold, 0.2);  // config/rover_indoor.yaml, fixed threshold
   EXPECT_GT(rejected.innovation, 0.5 + 0.02 * rejected.path_length);
   EXPECT_GT(rejected.path_length, 10.0);
   EXPECT_FALSE(rejected.converged);  // no trial solve
@@ -904,7 +904,7 @@ TEST_F(Adapter, CandidatesArePublishedWithTheRealPluginAndInFallbackToo) {
 TEST(ConfigFiles, ShippedYamlsLoadWithoutErrorsOrWarnings) {
   // adapter.test loads them into /yaml_check/{indoor,outdoor} with rosparam, as the launch
   // file does.
-  const std::pair<const char*, double> files[] = {{"/yaml_check/indoor", 0.15}, {"/yaml_check/outdoor", 1.0}};
+  const std::pair<const char*, double> files[] = {{"/yaml_check/indoor", 0.2}, {"/yaml_check/outdoor", 1.0}};
   for (const auto& f : files) {
     SCOPED_TRACE(f.first);
     ASSERT_TRUE(ros::param::has(std::string(f.first) + "/threshold"));

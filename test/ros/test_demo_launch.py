@@ -65,7 +65,7 @@ class DemoLaunch(unittest.TestCase):
         self.assertEqual(node.type, "rover_verifier_node")
         self.assertEqual(params["/rover_verifier/keyframe_topic"], "/vins_estimator/keyframe_pose")
         self.assertEqual(params["/rover_verifier/candidate_topic"], "/loop_fusion/loop_candidates")
-        self.assertEqual(params["/rover_verifier/rover/threshold"], 0.15)
+        self.assertEqual(params["/rover_verifier/rover/threshold"], 0.2)
         self.assertNotIn("/rover_verifier/threshold", params)
         params, _ = load("verifier.launch", "name:=b", "verifier:=accept_all",
                          "verifier_config:=" + os.path.join(ROOT, "config", "rover_outdoor.yaml"))
