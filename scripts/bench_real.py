@@ -15,9 +15,11 @@ Each sequence is replayed with rover_replay at its default configuration (EuRoC:
 tATE (temporal ATE): the mean ATE of what the system showed at --snapshots evenly spaced times
 (after 1/K, 2/K, .. of the keyframes), each against the ground truth of the keyframes it had by
 then: a false loop that wrecked the map for a while counts even if later loops repaired it.
-ATE: evo, positions, SE(3) Umeyama alignment. KITTI 09 runs twice: with the default 200 ms time
-budget of the trial solve (6-DoF solves over ~1200 keyframes exceed it: rejected, fail closed)
-and with the budget lifted (labelled "no budget").
+ATE: evo, positions, SE(3) Umeyama alignment. The trial solve's 200 ms time budget (wall-clock:
+on a loaded machine it fires at random) is lifted for EuRoC, whose verifications take
+milliseconds (">200ms" reports the share that took longer). KITTI 09 runs twice: with the
+default budget (6-DoF solves over ~1200 keyframes exceed it: rejected, fail closed) and with
+the budget lifted (labelled "no budget").
 Writes real.csv, summary.md, pr_real.png, ate_real.png into --out. --quick (CI): MH_01 only."""
 import argparse
 import os
@@ -36,7 +38,7 @@ COLUMNS = [("case", "sequence", ""), ("keyframes", "kf", "d"), ("true", "true", 
            ("ap_oracle", "AP oracle", ".4f"), ("mr_oracle", "MR oracle", ".2f"),
            ("ap_none", "AP none", ".4f"), ("mr_none", "MR none", ".2f"),
            ("threshold", "thr [m]", "g"), ("precision", "P", ".2f"), ("recall", "R", ".2f"),
-           ("not_scored", "no score", "d"),
+           ("not_scored", "no score", "d"), ("over_200ms", ">200ms", ".2f"),
            ("ate_odometry", "ATE odo", ".3f"), ("ate_accept_all", "ATE all", ".3f"),
            ("ate_verified", "ATE verified", ".3f"), ("ate_true_only", "ATE true-only", ".3f"),
            ("tate_odometry", "tATE odo", ".3f"), ("tate_accept_all", "tATE all", ".3f"),
@@ -51,7 +53,7 @@ def cases(quick):
             out.append((name, name + " (200 ms budget)", []))
             out.append((name, name + " (no budget)", ["--time_budget_ms", 0]))
         else:
-            out.append((name, name, []))
+            out.append((name, name, ["--time_budget_ms", 0]))
     return out
 
 
@@ -76,6 +78,7 @@ def run_case(case, out, snapshots, s):
             row.update(precision=dm["precision"], recall=dm["recall"], tp=dm["tp"], fp=dm["fp"], fn=dm["fn"])
             row["not_scored"] = int(sum(r not in metrics.SCORED_REASONS for r in j["reason"]))
             row["time_budget_exceeded"] = int(sum(r == "time_budget_exceeded" for r in j["reason"]))
+            row["over_200ms"] = sum(float(r["elapsed_ms"]) > 200.0 for r in j["rows"]) / max(1, len(j["rows"]))
         else:
             r = metrics.ranking_metrics(j["label"], j["score"])
             row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]

@@ -67,8 +67,9 @@ def fmt(v, spec):
     return str(v)
 
 
-def print_table(rows, columns, title=None, file=sys.stdout):
-    """columns: [(key, header, format spec)]; right-aligned plain-text table."""
+def print_table(rows, columns, title=None, file=None):
+    """columns: [(key, header, format spec)]; right-aligned plain-text table (stdout by default)."""
+    file = file or sys.stdout
     cells = [[h for _, h, _ in columns]] + [[fmt(r.get(k, ""), s) for k, _, s in columns] for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(len(columns))]
     if title:

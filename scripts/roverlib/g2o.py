@@ -30,7 +30,7 @@ from .scenario import Candidate, Keyframe, Scenario
 OUTLIER_KINDS = ("random", "local", "grouped", "repetitive")
 GROUP_SIZE = 10
 
-# name -> (g2o file, ground truth loader key)
+# name -> g2o file under ../shared/data (ground truth: groundtruth())
 GRAPHS = {
     "manhattan3500": "posegraphs/manhattan3500.g2o",
     "ringCity": "posegraphs/ringCity.g2o",

@@ -67,10 +67,7 @@ def build(graph, loops, initial, loop_kernel=None):
     fg = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
     for i, T in enumerate(initial):
-        if dim == 2:
-            values.insert(i, to_gtsam_pose(T, dim))
-        else:
-            values.insert(i, to_gtsam_pose(T, dim))
+        values.insert(i, to_gtsam_pose(T, dim))
     fg.add(Prior(0, to_gtsam_pose(initial[0], dim), gtsam.noiseModel.Isotropic.Sigma(3 if dim == 2 else 6, 1e-4)))
     known = [0]
     for e in graph.odometry:
