@@ -4,6 +4,9 @@
 # failed, errored or could not run.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
+# The Python tests (evaluation, benchmarks) need scikit-learn, evo, gtsam: a venv on top of
+# the system Python (scripts/venv.sh), which keeps the ROS modules visible.
+source "$ROVER_ROOT/scripts/venv.sh"
 cd "$ROVER_WS"
 # catkin_make run_tests builds and runs the gtests and rostests; it does not fail on test
 # failures, which are read back from the JUnit files by test_summary.py below.
@@ -13,7 +16,7 @@ grep -E '^\[( +OK|  FAILED|  PASSED|==========)|^(SUMMARY|\[ROSTEST\])|FAILURE|E
 # Python tools (simulator, evaluation): pytest writes JUnit XML next to catkin's results.
 # Exit 1 = some tests failed (counted from the XML); anything else means pytest could not run.
 pytest_rc=0
-ROVER_WS="$ROVER_WS" /usr/bin/python3 -m pytest -q -p no:cacheprovider "$ROVER_ROOT/test/python" \
+ROVER_WS="$ROVER_WS" "$ROVER_PYTHON" -m pytest -q -p no:cacheprovider "$ROVER_ROOT/test/python" \
   --junitxml="$ROVER_WS/build/test_results/rover_loop_fusion/pytest-python.xml" || pytest_rc=$?
 # Hardening: the core gtests under ASan+UBSan (second build space) and the libFuzzer targets
 # (committed corpus + ROVER_FUZZ_SECONDS of fuzzing each). Their JUnit files join the summary.

@@ -8,9 +8,12 @@
 //            not change the graph, so every run sees the same graph);
 //   full   : Verifier::solveLikeLoopFusion(5): the whole graph from the earliest loop,
 //            initialised from VIO, 5 iterations (what optimize4DoF does after every loop);
-// and prints a table and writes CSV.
+// and prints a table and writes CSV. The trial solve's time budget is lifted (the cost is what
+// is measured; the verifier would reject a candidate whose solve ran past it). --mode 6dof
+// times the 6-DoF graph (VO without IMU) instead.
 //
-//   rover_benchmark_cost [--sizes 1000,10000] [--spans 100,1000] [--repeats 20] [--csv FILE]
+//   rover_benchmark_cost [--sizes 1000,10000] [--spans 100,1000] [--repeats 20] [--mode 4dof|6dof]
+//                        [--csv FILE]
 #include "rover_loop_fusion/core/cost_functions.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
@@ -54,7 +57,7 @@ struct Row {
   bool accepted;
 };
 
-Row run(int n, int span, int repeats) {
+Row run(int n, int span, int repeats, core::Mode mode) {
   // Laps of a rectangle whose perimeter is `span` keyframes: every revisit is one span back.
   sim::LapsOptions o;
   o.step = 0.5;
@@ -68,7 +71,10 @@ Row run(int n, int span, int repeats) {
   sim::Scene s = sim::makeLapsScene(o);
   s.keyframes.resize(std::min<size_t>(s.keyframes.size(), n));
 
-  core::Verifier v;
+  core::VerifierConfig cfg;
+  cfg.mode = mode;
+  cfg.time_budget_ms = 0.0;
+  core::Verifier v(cfg);
   size_t next = 0;
   const sim::SimCandidate* last = nullptr;
   for (const sim::SimKeyframe& kf : s.keyframes) {
@@ -124,17 +130,24 @@ int main(int argc, char** argv) {
   std::vector<int> sizes = {1000, 10000};
   std::vector<int> spans = {100, 1000};
   int repeats = 20;
+  core::Mode mode = core::Mode::kFourDof;
   std::string csv;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (i + 1 >= argc) {
-      std::fprintf(stderr, "usage: rover_benchmark_cost [--sizes A,B] [--spans A,B] [--repeats N] [--csv FILE]\n");
+      std::fprintf(stderr, "usage: rover_benchmark_cost [--sizes A,B] [--spans A,B] [--repeats N] [--mode 4dof|6dof] [--csv FILE]\n");
       return 2;
     }
     if (a == "--sizes") sizes = parseList(argv[++i]);
     else if (a == "--spans") spans = parseList(argv[++i]);
     else if (a == "--repeats") repeats = std::max(1, std::atoi(argv[++i]));
     else if (a == "--csv") csv = argv[++i];
+    else if (a == "--mode") {
+      if (!core::parseMode(argv[++i], &mode)) {
+        std::fprintf(stderr, "--mode: 4dof or 6dof\n");
+        return 2;
+      }
+    }
     else {
       std::fprintf(stderr, "unknown option %s\n", a.c_str());
       return 2;
@@ -147,7 +160,7 @@ int main(int argc, char** argv) {
   for (int n : sizes) {
     for (int span : spans) {
       if (span >= n) continue;
-      const Row r = run(n, span, repeats);
+      const Row r = run(n, span, repeats, mode);
       std::printf("%9d %6d %7d %6d %12.3f %12.3f %14.3f %8.2f %7.3f %8.1f\n", r.n, r.span, r.window,
                   r.iterations, r.verify_ms, r.verify_p90_ms, r.full_ms, r.full_ms / r.verify_ms,
                   r.score, r.rss_mb);

@@ -6,7 +6,9 @@
 //                [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]
 //                [--threshold_per_metre K] [--max_threshold M]
 //                [--max_innovation M] [--max_innovation_per_metre K]  (0: no gate)
-//                [--window_margin N] [--time_budget_ms MS] [--robust_candidate] [--quiet]
+//                [--window_margin N] [--time_budget_ms MS] [--robust_candidate]
+//                [--max_relative_translation M] [--max_relative_yaw_deg D] [--snapshots K]
+//                [--quiet]
 //
 // Protocols:
 //   sequential  commit what the verifier accepts (what the product does);
@@ -21,12 +23,17 @@
 //   loop_fusion_verified.tum        loop_fusion's optimisation of the verified graph
 //   loop_fusion_accept_all.tum      loop_fusion's optimisation with every candidate
 //   groundtruth.tum                 (if the scenario has ground truth)
+//   snapshots/{verified,loop_fusion_verified,loop_fusion_accept_all}_K.tum
+//                                   with --snapshots K: the same trajectories as the run had
+//                                   them after k/K of the keyframes, k = 1..K (what the system
+//                                   showed at that time; for the temporal ATE)
 #include "rover_loop_fusion/core/verdict_csv.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scenario_io.h"
 
 #include <sys/stat.h>
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <map>
@@ -43,7 +50,8 @@ int usage(int code) {
                "                    [--threshold_per_metre K] [--max_threshold M]\n"
                "                    [--max_innovation M] [--max_innovation_per_metre K]\n"
                "                    [--window_margin N] [--time_budget_ms MS] [--robust_candidate]\n"
-               "                    [--quiet]\n");
+               "                    [--max_relative_translation M] [--max_relative_yaw_deg D]\n"
+               "                    [--snapshots K] [--quiet]\n");
   return code;
 }
 
@@ -72,6 +80,7 @@ int main(int argc, char** argv) {
   std::string scenario_dir, out_dir, protocol = "sequential";
   core::VerifierConfig cfg;
   bool quiet = false;
+  int snapshots = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -93,12 +102,16 @@ int main(int argc, char** argv) {
     else if (a == "--window_margin") cfg.window_margin = std::atoi(value().c_str());
     else if (a == "--time_budget_ms") cfg.time_budget_ms = std::atof(value().c_str());
     else if (a == "--robust_candidate") cfg.robust_candidate = true;
+    else if (a == "--max_relative_translation") cfg.max_relative_translation = std::atof(value().c_str());
+    else if (a == "--max_relative_yaw_deg") cfg.max_relative_yaw = std::atof(value().c_str()) * M_PI / 180.0;
+    else if (a == "--snapshots") snapshots = std::atoi(value().c_str());
     else if (a == "--quiet") quiet = true;
     else if (a == "--help" || a == "-h") return usage(0);
     else return usage(2);
   }
   if (scenario_dir.empty() || out_dir.empty()) return usage(2);
   if (protocol != "sequential" && protocol != "oracle" && protocol != "none") return usage(2);
+  if (snapshots < 0) return usage(2);
   const std::string invalid = cfg.validate();
   if (!invalid.empty()) {
     std::fprintf(stderr, "rover_replay: invalid parameters: %s\n", invalid.c_str());
@@ -148,7 +161,21 @@ int main(int argc, char** argv) {
                   static_cast<long long>(c.query_index), static_cast<long long>(c.match_index), sc.label,
                   v.accepted ? "ACCEPT" : "REJECT", core::toString(v.reason), v.score, v.elapsed_ms);
   };
+  // Snapshot k (1..K) is taken once the first ceil(k * N / K) keyframes have been handled.
+  size_t next_snapshot = 1, handled_keyframes = 0;
+  bool snapshots_ok = true;
+  if (snapshots > 0) makeDirs(out_dir + "/snapshots");
+  auto takeSnapshot = [&](size_t k) {
+    std::vector<core::Pose> est;
+    for (const core::TrajectoryPoint& p : verifier.trajectory()) est.push_back(p.estimate);
+    const std::string base = out_dir + "/snapshots/";
+    const std::string suffix = "_" + std::to_string(k) + ".tum";
+    snapshots_ok = snapshots_ok && writeTum(base + "verified" + suffix, stamps, est) &&
+                   writeTum(base + "loop_fusion_verified" + suffix, stamps, verifier.solveLikeLoopFusion(5).poses) &&
+                   writeTum(base + "loop_fusion_accept_all" + suffix, stamps, accept_all.solveLikeLoopFusion(5).poses);
+  };
   for (const sim::ScenarioKeyframe& k : s.keyframes) {
+    ++handled_keyframes;
     const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     if (!st) {
@@ -162,9 +189,15 @@ int main(int argc, char** argv) {
     auto range = by_query.equal_range(k.index);
     for (auto it = range.first; it != range.second; ++it) handle(s.candidates[it->second]);
     by_query.erase(range.first, range.second);
+    for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots) &&
+           handled_keyframes * snapshots >= next_snapshot * s.keyframes.size();
+         ++next_snapshot)
+      takeSnapshot(next_snapshot);
   }
   // Candidates whose query keyframe never arrived: still a verdict each (invalid input).
   for (const auto& left : by_query) handle(s.candidates[left.second]);
+  // Snapshots still due (the last keyframes were refused).
+  for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);
   std::fclose(csv);
 
   std::vector<core::Pose> estimate;
@@ -185,6 +218,7 @@ int main(int argc, char** argv) {
     }
     ok = ok && writeTum(out_dir + "/groundtruth.tum", gt_stamps, gt);
   }
+  ok = ok && snapshots_ok;
   if (!ok) {
     std::fprintf(stderr, "rover_replay: cannot write trajectories to %s\n", out_dir.c_str());
     return 1;
