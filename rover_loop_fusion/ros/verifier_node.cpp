@@ -3,6 +3,7 @@
 #include "rover_loop_fusion/ros/params.h"
 
 #include <Eigen/Geometry>
+#include <boost/make_shared.hpp>
 #include <nav_msgs/Path.h>
 
 #include <cmath>
@@ -64,7 +65,27 @@ typename Map::const_iterator nearest(const Map& m, int64_t ns, int64_t tol) {
 
 VerifierNode::VerifierNode(const ros::NodeHandle& nh, const ros::NodeHandle& pnh) : nh_(nh), pnh_(pnh) {}
 
-VerifierNode::~VerifierNode() = default;
+/// Runs one drainSome() on the main thread's callback queue.
+class VerifierNode::DrainCallback : public ros::CallbackInterface {
+ public:
+  explicit DrainCallback(VerifierNode* node) : node_(node) {}
+  CallResult call() override {
+    node_->drainSome(kBatch);
+    return Success;
+  }
+  static constexpr size_t kBatch = 200;
+
+ private:
+  VerifierNode* node_;
+};
+
+VerifierNode::~VerifierNode() {
+  if (receiver_) receiver_->stop();
+  keyframe_sub_.shutdown();
+  candidate_sub_.shutdown();
+  // Drain callbacks still on the global queue point at this node.
+  ros::getGlobalCallbackQueue()->removeByID(reinterpret_cast<uint64_t>(this));
+}
 
 bool VerifierNode::start(std::string* error) {
   std::vector<std::string> errors;
@@ -128,8 +149,17 @@ bool VerifierNode::start(std::string* error) {
   pose_graph_path_pub_ = pnh_.advertise<nav_msgs::Path>("pose_graph_path", 1, true);
   estimate_path_pub_ = pnh_.advertise<nav_msgs::Path>("estimate_path", 1, true);
   optimize_srv_ = pnh_.advertiseService("optimize", &VerifierNode::onOptimize, this);
-  keyframe_sub_ = nh_.subscribe(p.keyframe_topic, p.queue_size, &VerifierNode::onKeyframe, this);
-  candidate_sub_ = nh_.subscribe(p.candidate_topic, p.queue_size, &VerifierNode::onCandidate, this);
+  ros::SubscribeOptions ko = ros::SubscribeOptions::create<nav_msgs::Odometry>(
+      p.keyframe_topic, p.queue_size,
+      [this](const nav_msgs::Odometry::ConstPtr& m) { receive(Incoming{m, nullptr}); }, ros::VoidPtr(),
+      &receive_queue_);
+  ros::SubscribeOptions co = ros::SubscribeOptions::create<LoopCandidate>(
+      p.candidate_topic, p.queue_size, [this](const LoopCandidate::ConstPtr& m) { receive(Incoming{nullptr, m}); },
+      ros::VoidPtr(), &receive_queue_);
+  keyframe_sub_ = nh_.subscribe(ko);
+  candidate_sub_ = nh_.subscribe(co);
+  receiver_.reset(new ros::AsyncSpinner(1, &receive_queue_));
+  receiver_->start();
   pending_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &VerifierNode::onPendingTimer, this);
   if (p.optimize_period > 0)
     optimize_timer_ = nh_.createWallTimer(ros::WallDuration(p.optimize_period), &VerifierNode::onOptimizeTimer, this);
@@ -141,6 +171,11 @@ bool VerifierNode::start(std::string* error) {
 }
 
 void VerifierNode::finish() {
+  if (receiver_) receiver_->stop();
+  drainInbox();
+  if (inbox_dropped_ > 0)
+    ROS_ERROR("[rover] %zu messages were dropped because the inbox was full (queue_size=%d)", inbox_dropped_,
+              params_.queue_size);
   try {
     while (!pending_.empty()) {
       const Pending c = pending_.front();
@@ -152,6 +187,54 @@ void VerifierNode::finish() {
 }
 
 // ---- input -----------------------------------------------------------------------------------
+
+void VerifierNode::receive(Incoming item) {
+  bool schedule = false;
+  {
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    if (inbox_.size() >= static_cast<size_t>(params_.queue_size)) {
+      ++inbox_dropped_;
+      ROS_ERROR_THROTTLE(1.0, "[rover] %s message dropped: %zu messages are waiting to be processed "
+                         "(queue_size=%d; %zu dropped so far); verification is slower than the input",
+                         item.keyframe ? "keyframe" : "loop candidate", inbox_.size(), params_.queue_size,
+                         inbox_dropped_);
+      return;
+    }
+    inbox_.push_back(std::move(item));
+    if (inbox_.size() > inbox_peak_) {
+      inbox_peak_ = inbox_.size();
+      if (inbox_peak_ % 1000 == 0)
+        ROS_WARN("[rover] %zu messages waiting to be processed: verification is slower than the input",
+                 inbox_peak_);
+    }
+    if (!drain_scheduled_) drain_scheduled_ = schedule = true;
+  }
+  if (schedule)
+    ros::getGlobalCallbackQueue()->addCallback(boost::make_shared<DrainCallback>(this),
+                                               reinterpret_cast<uint64_t>(this));
+}
+
+void VerifierNode::drainSome(size_t max_items) {
+  for (size_t n = 0;; ++n) {
+    Incoming item;
+    {
+      std::lock_guard<std::mutex> lock(inbox_mutex_);
+      if (inbox_.empty()) {
+        drain_scheduled_ = false;
+        return;
+      }
+      if (n == max_items) break;  // still scheduled: comes back after the other callbacks
+      item = std::move(inbox_.front());
+      inbox_.pop_front();
+    }
+    if (item.keyframe) onKeyframe(item.keyframe);
+    if (item.candidate) onCandidate(item.candidate);
+  }
+  ros::getGlobalCallbackQueue()->addCallback(boost::make_shared<DrainCallback>(this),
+                                             reinterpret_cast<uint64_t>(this));
+}
+
+void VerifierNode::drainInbox() { drainSome(static_cast<size_t>(-1)); }
 
 void VerifierNode::onKeyframe(const nav_msgs::Odometry::ConstPtr& msg) {
   try {

@@ -20,6 +20,12 @@
 // invalid_input verdict with a ROS_WARN. Malformed keyframes (NaN, non-unit quaternion,
 // duplicate or out-of-order stamps) are refused with a ROS_WARN. Nothing a message contains
 // stops the node.
+//
+// Threading: the subscriptions have their own callback queue and thread, which only append
+// each message to an inbox (at most ~queue_size messages). The node's main thread (ros::spin)
+// takes them from the inbox in arrival order and does the work. A verification that takes
+// longer than the input rate (a bag played at 200x) therefore never makes roscpp drop
+// keyframe messages; if the inbox is full, the message is dropped with a ROS_ERROR.
 #pragma once
 
 #include "rover_loop_fusion/LoopCandidate.h"
@@ -29,11 +35,13 @@
 #include "rover_loop_fusion/ros/verifier_loader.h"
 
 #include <nav_msgs/Odometry.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 
 #include <deque>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 
 namespace rover_loop_fusion {
@@ -53,7 +61,7 @@ struct VerifierNodeParams {
   std::string frame_id = "world";  ///< frame of verdicts, markers and paths
   bool publish_markers = true;
   std::string verdict_log;         ///< CSV file every verdict is appended to; empty: off
-  int queue_size = 10000;          ///< subscriber queues: a bag played fast must not drop messages
+  int queue_size = 100000;         ///< messages waiting to be processed (inbox and subscriber queues)
 };
 
 class VerifierNode {
@@ -71,6 +79,10 @@ class VerifierNode {
 
   size_t verdictCount() const { return output_.published(); }
 
+  /// Processes everything in the inbox now (the main thread does this on its own; for shutdown
+  /// and tests).
+  void drainInbox();
+
  private:
   struct KeyframeRef;
   struct Pending {
@@ -78,7 +90,18 @@ class VerifierNode {
     ros::WallTime received;
   };
   enum class Resolution { kFound, kWait, kInvalid };
+  /// A message as received: exactly one of the two is set.
+  struct Incoming {
+    nav_msgs::Odometry::ConstPtr keyframe;
+    LoopCandidate::ConstPtr candidate;
+  };
+  class DrainCallback;
 
+  /// Receiver thread: appends to the inbox and schedules a drain on the main thread.
+  void receive(Incoming item);
+  /// Main thread: processes up to `max_items` messages from the inbox; reschedules itself
+  /// if more are waiting (so that timers and the service still get their turn).
+  void drainSome(size_t max_items);
   void onKeyframe(const nav_msgs::Odometry::ConstPtr& msg);
   void onCandidate(const LoopCandidate::ConstPtr& msg);
   bool onOptimize(Optimize::Request& req, Optimize::Response& res);
@@ -109,6 +132,16 @@ class VerifierNode {
   ros::Publisher odometry_path_pub_, pose_graph_path_pub_, estimate_path_pub_;
   ros::ServiceServer optimize_srv_;
   ros::WallTimer pending_timer_, optimize_timer_;
+
+  // Receiving (see "Threading" above). The spinner is declared last among these so that it is
+  // destroyed (stopped) first.
+  ros::CallbackQueue receive_queue_;
+  std::mutex inbox_mutex_;
+  std::deque<Incoming> inbox_;
+  bool drain_scheduled_ = false;
+  size_t inbox_peak_ = 0;
+  size_t inbox_dropped_ = 0;
+  std::unique_ptr<ros::AsyncSpinner> receiver_;
 
   int64_t next_index_ = 0;              // number of the next keyframe message
   std::map<int64_t, int64_t> by_stamp_;  // stamp [ns] -> index, keyframes in the graph

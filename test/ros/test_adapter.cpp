@@ -38,6 +38,16 @@ using visualization_msgs::MarkerArray;
 
 namespace {
 
+// What a test verifier that accepts everything returns.
+core::Verdict acceptedVerdict(const core::LoopCandidate& c) {
+  core::Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = true;
+  v.reason = core::Reason::kAccepted;
+  return v;
+}
+
 const char kRover[] = "rover_loop_fusion/TrajectoryPriorVerifier";
 const char kAcceptAll[] = "rover_loop_fusion/AcceptAllVerifier";
 
@@ -667,12 +677,7 @@ class MisbehavingVerifier : public LoopVerifier {
   }
   core::Verdict verify(const core::LoopCandidate& c) override {
     if (throw_on_verify) throw std::runtime_error("verify exploded");
-    core::Verdict v;
-    v.query_index = c.query_index;
-    v.match_index = c.match_index;
-    v.accepted = true;
-    v.reason = core::Reason::kAccepted;
-    return v;
+    return acceptedVerdict(c);
   }
   core::Status commit(const core::LoopCandidate&) override {
     if (throw_on_commit) throw 42;  // not even a std::exception
@@ -826,12 +831,7 @@ class SpyVerifier : public LoopVerifier {
   }
   core::Verdict verify(const core::LoopCandidate& c) override {
     published_before_verify.push_back(spy_->waitFor(++verified_));
-    core::Verdict v;
-    v.query_index = c.query_index;
-    v.match_index = c.match_index;
-    v.accepted = true;
-    v.reason = core::Reason::kAccepted;
-    return v;
+    return acceptedVerdict(c);
   }
   core::Status commit(const core::LoopCandidate&) override { return core::Status::Ok(); }
   std::vector<bool> published_before_verify;
