@@ -153,10 +153,13 @@ def main(argv=None):
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
     stamps = {k.index: k.stamp for k in s.keyframes}
     by_stamp = {(round(stamps[c.query], 3), round(stamps[c.match], 3)): c.label for c in s.candidates}
-    fp = sum(1 for r in rows if r["accepted"] == "1" and
-             by_stamp.get((round(float(r["query_stamp"]), 3), round(float(r["match_stamp"]), 3))) == 0)
-    tp = sum(1 for r in rows if r["accepted"] == "1" and
-             by_stamp.get((round(float(r["query_stamp"]), 3), round(float(r["match_stamp"]), 3))) == 1)
+    label_of = [by_stamp.get((round(float(r["query_stamp"]), 3), round(float(r["match_stamp"]), 3))) for r in rows]
+    fp = sum(1 for r, lab in zip(rows, label_of) if r["accepted"] == "1" and lab == 0)
+    tp = sum(1 for r, lab in zip(rows, label_of) if r["accepted"] == "1" and lab == 1)
+    by_label = {1: {}, 0: {}}
+    for r, lab in zip(rows, label_of):
+        if lab in by_label:
+            by_label[lab][r["reason"]] = by_label[lab].get(r["reason"], 0) + 1
     rss = [r[2] for r in rss_rows if r[2] == r[2]]
     with open(os.path.join(a.out, "rss.csv"), "w") as f:
         f.write("seconds,verdicts,rss_mb\n")
@@ -171,6 +174,8 @@ def main(argv=None):
         f"{'still running' if alive else 'EXITED'} after {wall:.0f} s",
         f"  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
         f"  accepted: {tp} true, {fp} false (labels)",
+        *(f"  {name} candidates: " + ", ".join(f"{k} {v}" for k, v in sorted(by_label[lab].items()))
+          for name, lab in (("true", 1), ("false", 0))),
         f"  verification latency [ms]: p50 {percentile(lat, .5):.2f}  p90 {percentile(lat, .9):.2f}  "
         f"p99 {percentile(lat, .99):.2f}  max {max(lat) if lat else float('nan'):.2f}",
         f"  node RSS [MB]: start {rss[0] if rss else float('nan'):.1f}, after a quarter of the verdicts "
