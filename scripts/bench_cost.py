@@ -106,11 +106,8 @@ def main(argv=None):
               f"loop_fusion {r['loop_fusion_full_ms']:.1f} ms, peak RSS {r['peak_rss_mb']:.1f} MB", flush=True)
     title = ("Cost of one verification vs loop_fusion's full optimisation of the same graph (one process per row; "
              f"median of {a.repeats} verifications)")
-    bench.print_table(rows, COLUMNS, title)
     os.makedirs(a.out, exist_ok=True)
-    bench.write_csv(rows, os.path.join(a.out, "cost.csv"))
-    with open(os.path.join(a.out, "summary.md"), "w") as f:
-        f.write(title + "\n\n" + bench.markdown_table(rows, COLUMNS))
+    bench.report(rows, COLUMNS, title, a.out, "cost.csv")
     plot(rows, os.path.join(a.out, "cost.png"))
     print(f"wrote {a.out}/cost.csv, summary.md, cost.png")
     return 0

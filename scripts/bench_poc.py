@@ -88,10 +88,7 @@ def main(argv=None):
     title = (f"PoC: {n} true + {n} false candidates per case, seed 0; sequential decisions at "
              f"{params['threshold']:g} m, innovation gate {params['max_innovation']:g} m + "
              f"{params['max_innovation_per_metre']:g} x path")
-    bench.print_table(rows, COLUMNS, title)
-    bench.write_csv(rows, os.path.join(a.out, "poc.csv"))
-    with open(os.path.join(a.out, "summary.md"), "w") as f:
-        f.write(f"{title}\n\n" + bench.markdown_table(rows, COLUMNS))
+    bench.report(rows, COLUMNS, title, a.out, "poc.csv")
     for p in ("oracle", "none"):
         panels = []
         for name in dict.fromkeys(c[0] for c in cases):

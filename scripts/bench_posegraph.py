@@ -197,10 +197,7 @@ def main(argv=None):
     title = (f"Pose graphs with injected outliers (seed 0), ROVER sequential at {params['threshold']:g} m, "
              f"innovation gate {params['max_innovation']:g} m + {params['max_innovation_per_metre']:g} x path; "
              f"ATE RMSE [m] against the reference after SE(3) alignment")
-    bench.print_table(rows, COLUMNS, title)
-    bench.write_csv(rows, os.path.join(a.out, "posegraph.csv"))
-    with open(os.path.join(a.out, "summary.md"), "w") as f:
-        f.write(title + "\n\n" + "".join(f"- {n}\n" for n in notes) + "\n" + bench.markdown_table(rows, COLUMNS))
+    bench.report(rows, COLUMNS, title, a.out, "posegraph.csv", notes)
     for name in graphs:
         plot(rows, name, os.path.join(a.out, f"{name}.png"))
     print(f"wrote {a.out}/posegraph.csv, summary.md, " + ", ".join(f"{n}.png" for n in graphs))

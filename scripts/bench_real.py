@@ -144,10 +144,7 @@ def main(argv=None):
              f"{outd['threshold']:g} m, gate {outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path, "
              f"6-DoF), seed 0; "
              f"ATE/tATE [m] (evo, SE(3), tATE over {a.snapshots} times)")
-    bench.print_table(rows, COLUMNS, title)
-    bench.write_csv(rows, os.path.join(a.out, "real.csv"))
-    with open(os.path.join(a.out, "summary.md"), "w") as f:
-        f.write(title + "\n\n" + bench.markdown_table(rows, COLUMNS))
+    bench.report(rows, COLUMNS, title, a.out, "real.csv")
     panels = [(r["case"], [(p, cv[p]) for p in ("oracle", "none")]) for r, cv in results]
     metrics.plot_pr_grid(panels, os.path.join(a.out, "pr_real.png"), ncols=4,
                          suptitle="Real drift: precision-recall of the scores (positives: true loops)")

@@ -42,16 +42,6 @@ std::string join(const std::vector<std::string>& parts, const char* sep) {
   return out;
 }
 
-core::Verdict rejection(const core::LoopCandidate& c, const std::string& detail) {
-  core::Verdict v;
-  v.query_index = c.query_index;
-  v.match_index = c.match_index;
-  v.accepted = false;
-  v.reason = core::Reason::kInvalidInput;
-  v.detail = detail;
-  return v;
-}
-
 /// Ends the host process after a configuration error (ROS_FATAL has said which parameter to
 /// fix). Not exit(): loop_fusion's static destructors would run (~PoseGraph detaches a thread
 /// that setIMUFlag has not started yet, which throws); not ros::shutdown(): loop_fusion's
@@ -314,25 +304,8 @@ bool LoopFusionAdapter::verifyLoop(int query_index, int match_index, const LoopI
         accepted = true;
         break;
       case Impl::Mode::kVerifying:
-        try {
-          v = m.verifier->verify(c);
-          if (v.accepted) {
-            const core::Status s = m.verifier->commit(c);
-            if (s.ok) {
-              accepted = true;
-            } else {
-              v.accepted = false;
-              v.reason = core::Reason::kInvalidInput;
-              v.detail += "; but the verifier refused to commit it: " + s.message;
-            }
-          }
-        } catch (const std::exception& e) {
-          ROS_ERROR("[rover] verifier %s threw on loop %d -> %d: %s", type.c_str(), query_index, match_index, e.what());
-          v = rejection(c, std::string("the verifier threw an exception: ") + e.what());
-        } catch (...) {
-          ROS_ERROR("[rover] verifier %s threw on loop %d -> %d", type.c_str(), query_index, match_index);
-          v = rejection(c, "the verifier threw an exception");
-        }
+        v = verifyAndCommit(*m.verifier, type, c);
+        accepted = v.accepted;
         break;
     }
     try {

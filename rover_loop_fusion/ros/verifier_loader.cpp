@@ -1,6 +1,7 @@
 #include "rover_loop_fusion/ros/verifier_loader.h"
 
 #include <pluginlib/class_loader.hpp>
+#include <ros/console.h>
 #include <ros/names.h>
 
 #include <algorithm>
@@ -61,6 +62,38 @@ bool initializeVerifier(LoopVerifier& verifier, const std::string& type, const s
     *error = type + ": initialize threw";
   }
   return false;
+}
+
+core::Verdict rejection(const core::LoopCandidate& c, const std::string& detail) {
+  core::Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = false;
+  v.reason = core::Reason::kInvalidInput;
+  v.detail = detail;
+  return v;
+}
+
+core::Verdict verifyAndCommit(LoopVerifier& verifier, const std::string& type, const core::LoopCandidate& c) {
+  const long q = static_cast<long>(c.query_index), m = static_cast<long>(c.match_index);
+  try {
+    core::Verdict v = verifier.verify(c);
+    if (v.accepted) {
+      const core::Status s = verifier.commit(c);
+      if (!s.ok) {
+        v.accepted = false;
+        v.reason = core::Reason::kInvalidInput;
+        v.detail += "; but the verifier refused to commit it: " + s.message;
+      }
+    }
+    return v;
+  } catch (const std::exception& e) {
+    ROS_ERROR("[rover] verifier %s threw on loop %ld -> %ld: %s", type.c_str(), q, m, e.what());
+    return rejection(c, std::string("the verifier threw an exception: ") + e.what());
+  } catch (...) {
+    ROS_ERROR("[rover] verifier %s threw on loop %ld -> %ld", type.c_str(), q, m);
+    return rejection(c, "the verifier threw an exception");
+  }
 }
 
 bool validVerifierName(const std::string& name) {

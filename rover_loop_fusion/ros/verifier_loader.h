@@ -1,6 +1,6 @@
-// Loading and starting a verifier plugin: shared by the loop_fusion adapter and
+// Loading, starting and calling a verifier plugin: shared by the loop_fusion adapter and
 // rover_verifier_node, so that both accept the same type names, report the same errors and
-// never let an exception of a plugin's initialize() escape.
+// never let an exception of a plugin escape.
 #pragma once
 
 #include "rover_loop_fusion/ros/loop_verifier.h"
@@ -33,6 +33,14 @@ VerifierPtr loadVerifierPlugin(const std::string& type, const std::string& type_
 /// false and sets *error to "<type>: <why>".
 bool initializeVerifier(LoopVerifier& verifier, const std::string& type, const std::string& name,
                         ros::NodeHandle& nh, const HostInfo& host, std::string* error);
+
+/// An invalid_input rejection of c that says why.
+core::Verdict rejection(const core::LoopCandidate& c, const std::string& detail);
+
+/// One decision on c: verifier.verify(c) and, if it accepts, verifier.commit(c). A refused
+/// commit turns the verdict into an invalid_input rejection; an exception from the plugin
+/// gives a rejection and a ROS_ERROR naming `type`. Never throws.
+core::Verdict verifyAndCommit(LoopVerifier& verifier, const std::string& type, const core::LoopCandidate& c);
 
 /// A verifier_name must be a plain graph-resource name (the plugin's parameter namespace).
 bool validVerifierName(const std::string& name);

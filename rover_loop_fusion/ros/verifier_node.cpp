@@ -390,32 +390,17 @@ void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match
   c.relative_q = Eigen::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
   c.relative_yaw = std::isnan(msg.relative_yaw) ? yawOf(c.relative_q) : msg.relative_yaw;
   c.inliers = msg.inliers;
-  core::Verdict v;
-  try {
-    v = verifier_->verify(c);
-    if (v.accepted) {
-      const core::Status s = verifier_->commit(c);
-      if (!s.ok) {
-        v.accepted = false;
-        v.reason = core::Reason::kInvalidInput;
-        v.detail += "; but the verifier refused to commit it: " + s.message;
-      } else {
-        const core::Status g = graph_->commit(c, /*update_estimate=*/false);
-        if (g.ok) {
-          changed_ = true;
-        } else {
-          v.accepted = false;
-          v.reason = core::Reason::kInvalidInput;
-          v.detail += "; but the node's pose graph refused it: " + g.message;
-        }
-      }
+  core::Verdict v = verifyAndCommit(*verifier_, verifier_type_, c);
+  if (v.accepted) {
+    // The core's API reports refusals as a Status; it does not throw.
+    const core::Status g = graph_->commit(c, /*update_estimate=*/false);
+    if (g.ok) {
+      changed_ = true;
+    } else {
+      v.accepted = false;
+      v.reason = core::Reason::kInvalidInput;
+      v.detail += "; but the node's pose graph refused it: " + g.message;
     }
-  } catch (const std::exception& e) {
-    v = core::Verdict();
-    v.detail = std::string("the verifier threw an exception: ") + e.what();
-  } catch (...) {
-    v = core::Verdict();
-    v.detail = "the verifier threw an exception";
   }
   v.query_index = query;
   v.match_index = match;

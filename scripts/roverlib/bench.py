@@ -99,6 +99,16 @@ def print_table(rows, columns, title=None, file=None):
     file.flush()
 
 
+def report(rows, columns, title, out_dir, csv_name, notes=()):
+    """What every family ends with: the table on stdout, rows as CSV, summary.md (title, notes
+    as a list, the table) in out_dir."""
+    print_table(rows, columns, title)
+    write_csv(rows, os.path.join(out_dir, csv_name))
+    with open(os.path.join(out_dir, "summary.md"), "w") as f:
+        f.write(title + "\n\n" + "".join(f"- {n}\n" for n in notes) + ("\n" if notes else "") +
+                markdown_table(rows, columns))
+
+
 def markdown_table(rows, columns):
     out = ["| " + " | ".join(h for _, h, _ in columns) + " |", "|" + "---|" * len(columns)]
     out += ["| " + " | ".join(fmt(r.get(k, ""), s) for k, _, s in columns) + " |" for r in rows]
