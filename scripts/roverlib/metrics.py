@@ -4,8 +4,8 @@ trajectory errors (ATE, temporal ATE) with evo. Needs the venv of scripts/venv.s
 Conventions (as GV-Bench): positives are TRUE loops. A verdict's `score` is the decision
 function of the verifier with higher = more likely false, so the ranking score handed to
 scikit-learn is -score. Candidates without a finite score (verdicts not_converged,
-time_budget_exceeded, invalid_input, no_trajectory_prior) rank last (+inf): rejected, and no
-evidence for a true loop.
+time_budget_exceeded, innovation_above_bound, invalid_input, no_trajectory_prior) rank last
+(+inf): rejected, and no evidence for a true loop.
 
 AP = sklearn.metrics.average_precision_score(labels, -score).
 MR = maximum recall at 100 % precision = max recall over the points of
