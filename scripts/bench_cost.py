@@ -25,7 +25,7 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from roverlib import bench  # noqa: E402
+from roverlib import bench, metrics  # noqa: E402
 
 COLUMNS = [("mode", "mode", ""), ("keyframes", "keyframes", "d"), ("span", "span", "d"), ("window", "window", "d"),
            ("iterations", "iters", "d"), ("verify_median_ms", "verify median [ms]", ".3f"),
@@ -75,9 +75,7 @@ def plot(rows, path):
     ax.set_ylabel("time [ms]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    metrics.save_figure(fig, path)
 
 
 def main(argv=None):

@@ -156,9 +156,7 @@ def plot(rows, name, path):
     bx.grid(alpha=0.3)
     bx.legend(fontsize=7)
     bx.set_title("decisions, every configuration", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    metrics.save_figure(fig, path)
 
 
 def main(argv=None):

@@ -116,9 +116,7 @@ def plot_ate(rows, path):
         ax.set_ylabel(f"{'ATE' if metric == 'ate' else 'temporal ATE'} RMSE [m]")
         ax.grid(alpha=0.3, axis="y")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    metrics.save_figure(fig, path)
 
 
 def main(argv=None):

@@ -152,6 +152,12 @@ def plot_pr_grid(panels, path, ncols=3, suptitle=""):
         ax.axis("off")
     if suptitle:
         fig.suptitle(suptitle, fontsize=10)
+    save_figure(fig, path)
+
+
+def save_figure(fig, path):
+    """Lays out, writes and closes a matplotlib figure (every PNG of the benchmarks)."""
+    import matplotlib.pyplot as plt
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

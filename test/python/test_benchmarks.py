@@ -5,7 +5,7 @@ import os
 
 import pytest
 
-from conftest import devel_tool
+from conftest import built_tool
 
 import bench_cost
 import bench_poc
@@ -17,8 +17,7 @@ from roverlib import bench
 @pytest.fixture(autouse=True)
 def _built():
     for tool in ("rover_replay", "rover_benchmark_cost"):
-        if not os.path.exists(devel_tool(tool)):
-            pytest.fail(f"{devel_tool(tool)} not built: run scripts/test.sh")
+        built_tool(tool)
 
 
 def _rows(path):

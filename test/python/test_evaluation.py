@@ -2,13 +2,12 @@
 precision/recall and ATE are known, and rover_replay's snapshots for the temporal ATE."""
 import json
 import math
-import os
 import subprocess
 
 import numpy as np
 import pytest
 
-from conftest import devel_tool
+from conftest import built_tool
 from roverlib import metrics, scenario, scenes
 
 import evaluate
@@ -144,9 +143,7 @@ def test_evaluate_cli_writes_metrics_and_pr_curve(tmp_path):
 
 
 def test_replay_snapshots_and_evaluate_run(tmp_path):
-    tool = devel_tool("rover_replay")
-    if not os.path.exists(tool):
-        pytest.fail(f"{tool} not built: run scripts/test.sh")
+    tool = built_tool("rover_replay")
     s = scenes.make_scene("room", 0.05, seed=5, n_true=10, n_false=10)
     scenario.write(s, str(tmp_path / "scn"))
     out = tmp_path / "run"

@@ -1,12 +1,11 @@
 """The scenario simulator: labels agree with the ground truth, files round-trip, the C++
 reader (rover_replay) reads what Python writes, and real-data scenarios load."""
-import os
 import subprocess
 
 import numpy as np
 import pytest
 
-from conftest import devel_tool
+from conftest import built_tool
 from roverlib import geometry as g
 from roverlib import real_data, scenario, scenes
 
@@ -56,9 +55,7 @@ def test_scenario_round_trip(tmp_path):
 
 
 def test_replay_reads_what_python_writes(tmp_path):
-    tool = devel_tool("rover_replay")
-    if not os.path.exists(tool):
-        pytest.fail(f"{tool} not built: run scripts/test.sh")
+    tool = built_tool("rover_replay")
     s = scenes.make_scene("corridor", 0.03, seed=4, n_true=20, n_false=20)
     scenario.write(s, str(tmp_path / "scn"))
     out = subprocess.run([tool, "--scenario", str(tmp_path / "scn"), "--out", str(tmp_path / "out"),
