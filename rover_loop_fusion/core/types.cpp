@@ -51,6 +51,26 @@ LoopCandidate candidateFromLoopInfo(int64_t query_index, int64_t match_index,
   return c;
 }
 
+Verdict Verdict::Accept(const LoopCandidate& c, std::string detail, Reason reason) {
+  Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = true;
+  v.reason = reason;
+  v.detail = std::move(detail);
+  return v;
+}
+
+Verdict Verdict::Reject(Reason reason, const LoopCandidate& c, std::string detail) {
+  Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = false;
+  v.reason = reason == Reason::kAccepted ? Reason::kInvalidInput : reason;  // never "rejected: accepted"
+  v.detail = std::move(detail);
+  return v;
+}
+
 std::string VerifierConfig::validate() const {
   std::ostringstream e;
   auto positive = [&](const char* name, double v) {

@@ -27,6 +27,7 @@
 //                                   with --snapshots K: the same trajectories as the run had
 //                                   them after k/K of the keyframes, k = 1..K (what the system
 //                                   showed at that time; for the temporal ATE)
+#include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/verdict_csv.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scenario_io.h"
@@ -137,7 +138,8 @@ int main(int argc, char** argv) {
     by_query.emplace(s.candidates[i].candidate.query_index, i);
   std::map<int64_t, double> stamp_of;
 
-  core::Verifier verifier(cfg), accept_all(cfg);
+  core::Verifier verifier(cfg);
+  core::PoseGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
   int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0;
   size_t verified = 0;
   double verify_ms = 0.0;
@@ -150,7 +152,7 @@ int main(int argc, char** argv) {
     verify_ms += v.elapsed_ms;
     const bool commit = protocol == "sequential" ? v.accepted : protocol == "oracle" ? sc.label == 1 : false;
     if (commit) verifier.commit(c);
-    accept_all.commit(c, false);
+    accept_all.addLoop(c);
     if (sc.label == 1) (v.accepted ? tp : fn)++;
     if (sc.label == 0) (v.accepted ? fp : tn)++;
     const double qs = stamp_of.count(c.query_index) ? stamp_of[c.query_index] : 0.0;

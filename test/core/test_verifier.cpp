@@ -1,4 +1,3 @@
-#include "rover_loop_fusion/core/cost_functions.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
