@@ -136,6 +136,8 @@ struct Status {
   explicit operator bool() const { return ok; }
 };
 
+/// The verifier's parameters. Every field is a row of the parameter table (core/parameters.h:
+/// its YAML name, unit, range and doc); adding a field means adding its row there.
 struct VerifierConfig {
   Mode mode = Mode::kFourDof;
   Alignment alignment = Alignment::kSE3;
@@ -191,7 +193,8 @@ struct VerifierConfig {
   /// Tolerance on | |q| - 1 | for quaternions handed in.
   double quaternion_tolerance = 1e-3;
 
-  /// Empty when usable; otherwise says which field is wrong and why.
+  /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
+  /// says which fields are wrong and why.
   std::string validate() const;
 };
 
