@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# One command per benchmark family (README "Results"); builds the package and the Python venv
+# One command per benchmark family (docs/results.md); builds the package and the Python venv
 # on first use, then runs the family's script with the venv's Python:
 #
 #   ./scripts/bench.sh poc|real|posegraph|cost [--quick] [options of that script, --help]

@@ -38,7 +38,7 @@ def test_poc_quick(tmp_path, capsys):
         assert int(r["true"]) == 40 and int(r["false"]) == 40
         for k in ("ap_oracle", "mr_oracle", "ap_none", "mr_none", "seq_precision", "seq_recall"):
             assert 0.0 <= float(r[k]) <= 1.0 + 1e-9, k
-    # the room at low noise is the easy case of the paper's PoC (README "Results")
+    # the room at low noise is the easy case of the paper's PoC (docs/results.md)
     assert float(rows[0]["ap_oracle"]) > 0.99 and float(rows[0]["seq_precision"]) == 1.0
     assert "AP oracle" in capsys.readouterr().out
     _pngs(tmp_path, ["pr_oracle.png", "pr_none.png"])

@@ -4,7 +4,7 @@
 // messages, including the verdicts and markers the adapter publishes. The test checks that
 // every candidate gets exactly one verdict on the topic and that the has_loop decisions
 // match them; built with -DROVER_TSAN=ON and run by hand it is the ThreadSanitizer stress
-// test (README "Hardening").
+// test (docs/testing.md, ThreadSanitizer).
 #include "rover_loop_fusion/LoopVerdict.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
