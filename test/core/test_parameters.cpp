@@ -19,7 +19,7 @@ namespace {
 
 const std::string kSource = ROVER_SOURCE_DIR;
 /// The page that documents every verifier parameter.
-const std::string kParameterDoc = "README.md";
+const std::string kParameterDoc = "docs/ros-api.md";
 
 std::string readText(const std::string& path) {
   std::ifstream f(path);
