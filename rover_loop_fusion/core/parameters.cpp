@@ -87,7 +87,14 @@ Parameter choice(const char* name, std::vector<std::string> choices, const char*
 std::vector<Parameter> makeTable() {
   using C = VerifierConfig;
   std::vector<Parameter> t;
-  // Decision (the innovation gate, then the score; core/decision.h).
+  // How candidates are decided (core/decision.h).
+  Parameter decision = choice("decision", {"metric", "chi2"},
+                              "metric: threshold and innovation gate in metres (the paper's method); chi2: in "
+                              "units of drift (drift_* model, gate_probability, lookalike_*)");
+  decision.get = [](const C& c) { return ParameterValue::Text(toString(c.decision)); };
+  decision.set = [](C* c, const ParameterValue& v, bool) { parseDecision(v.text, &c->decision); };
+  t.push_back(decision);
+  // decision: metric (the innovation gate, then the score).
   t.push_back(number("threshold", "m", &C::threshold, 0.0, 10.0, true,
                      "accept iff the deformation score <= threshold + threshold_per_metre x path length"));
   t.push_back(number("threshold_per_metre", "m/m", &C::threshold_per_metre, 0.0, 1.0, false,
@@ -140,6 +147,32 @@ std::vector<Parameter> makeTable() {
   t.push_back(boolean("anchor_incoming_keyframes", &C::anchor_incoming_keyframes,
                       "poses arrive in raw per-session VIO frames and the verifier applies the sequence "
                       "shift itself (rover_verifier_node; false with loop_fusion)"));
+  // decision: chi2 (the drift model, the gate, the look-alike test; core/drift.h, core/decision.h).
+  t.push_back(number("drift_xy", "m/sqrt(m)", &C::drift_xy, 0.0, 10.0, true,
+                     "odometry drift, horizontal: standard deviation per square root of a metre travelled"));
+  t.push_back(number("drift_z", "m/sqrt(m)", &C::drift_z, 0.0, 10.0, true,
+                     "odometry drift, vertical: standard deviation per square root of a metre travelled"));
+  t.push_back(degrees("drift_yaw_deg", &C::drift_yaw, 0.0, 90.0, true,
+                      "odometry yaw drift: standard deviation [deg] per square root of a metre travelled"));
+  t.push_back(number("drift_min_step", "m", &C::drift_min_step, 0.0, 100.0, true,
+                     "every keyframe step drifts at least as much as one this long (rotations in place)"));
+  t.push_back(number("loop_sigma", "m", &C::loop_sigma, 0.0, 10.0, true,
+                     "standard deviation of a loop's relative translation (per axis)"));
+  t.push_back(degrees("loop_sigma_yaw_deg", &C::loop_sigma_yaw, 0.0, 90.0, true,
+                      "standard deviation of a loop's relative yaw"));
+  t.push_back(number("gate_probability", "", &C::gate_probability, 0.5, 1.0 - 1e-12, false,
+                     "reject iff the innovation's Mahalanobis distance exceeds this chi-square quantile (4 dof)"));
+  t.push_back(number("lookalike_distance", "m", &C::lookalike_distance, 0.0, 1000.0, false,
+                     "the environment repeats this far away horizontally (aisles, doors); 0: no such look-alikes"));
+  t.push_back(number("lookalike_distance_vertical", "m", &C::lookalike_distance_vertical, 0.0, 1000.0, false,
+                     "the environment repeats this far away vertically (floors); 0: no such look-alikes"));
+  t.push_back(number("lookalike_margin", "", &C::lookalike_margin, 0.0, 100.0, false,
+                     "reject unless the place explains the innovation better than any look-alike by this "
+                     "much (difference of Mahalanobis distances, 2 ln of the likelihood ratio)"));
+  t.push_back(integer("max_loop_anchors", "", &C::max_loop_anchors, 2, 100000,
+                      "accepted loops (revisits merged) at most in the condensed graph: bounds the cost"));
+  t.push_back(boolean("calibrate_drift", &C::calibrate_drift,
+                      "scale the drift model to the innovations of the accepted loops (robust fit)"));
   return t;
 }
 

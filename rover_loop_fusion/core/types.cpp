@@ -14,6 +14,8 @@ const char* toString(Reason reason) {
     case Reason::kInvalidInput: return "invalid_input";
     case Reason::kTimeBudgetExceeded: return "time_budget_exceeded";
     case Reason::kInnovationAboveBound: return "innovation_above_bound";
+    case Reason::kInconsistentWithDrift: return "inconsistent_with_drift";
+    case Reason::kLookalikeCloser: return "lookalike_closer";
   }
   return "invalid_input";
 }
@@ -22,6 +24,15 @@ const char* toString(Mode mode) { return mode == Mode::kFourDof ? "4dof" : "6dof
 
 const char* toString(Alignment alignment) {
   return alignment == Alignment::kSE3 ? "se3" : "sim3";
+}
+
+const char* toString(Decision decision) { return decision == Decision::kChi2 ? "chi2" : "metric"; }
+
+bool parseDecision(const std::string& s, Decision* decision) {
+  if (s == "chi2") *decision = Decision::kChi2;
+  else if (s == "metric") *decision = Decision::kMetric;
+  else return false;
+  return true;
 }
 
 bool parseMode(const std::string& s, Mode* mode) {

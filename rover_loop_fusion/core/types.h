@@ -23,6 +23,14 @@ enum class Mode { kFourDof, kSixDof };
 /// kSE3 when scale is observable (VIO, stereo); kSim3 for monocular VO.
 enum class Alignment { kSE3, kSim3 };
 
+/// How a candidate is decided (docs/method.md).
+/// kMetric: the paper's deformation score against a threshold in metres, behind an innovation
+///   gate in metres that grows with the path (rover_paper.yaml: threshold only).
+/// kChi2: in units of drift: the innovation's Mahalanobis distance under the uncertainty of the
+///   relative pose through the graph (drift model + accepted loops) against a chi-square
+///   quantile, and the look-alike test (no look-alike place explains the candidate better).
+enum class Decision { kMetric, kChi2 };
+
 /// Why a verdict came out the way it did. Exactly one per verdict.
 enum class Reason {
   kAccepted,             ///< solve converged and score <= threshold
@@ -31,6 +39,8 @@ enum class Reason {
   kNoTrajectoryPrior,    ///< query and match are in sequences nothing connects yet
   kInvalidInput,         ///< the candidate or the graph state is not usable
   kTimeBudgetExceeded,   ///< the solve ran past config.time_budget_ms
+  kInconsistentWithDrift, ///< chi2: the innovation's Mahalanobis distance exceeds the gate
+  kLookalikeCloser,      ///< chi2: a look-alike place at lookalike_distance explains it better
   kInnovationAboveBound, ///< the candidate disagrees with the estimate by more than the drift
                          ///< over the path between the two keyframes can explain (no solve)
 };
@@ -39,6 +49,8 @@ enum class Reason {
 const char* toString(Reason reason);
 const char* toString(Mode mode);
 const char* toString(Alignment alignment);
+const char* toString(Decision decision);
+bool parseDecision(const std::string& s, Decision* decision);
 bool parseMode(const std::string& s, Mode* mode);
 bool parseAlignment(const std::string& s, Alignment* alignment);
 
@@ -139,6 +151,9 @@ struct Status {
 /// The verifier's parameters. Every field is a row of the parameter table (core/parameters.h:
 /// its YAML name, unit, range and doc); adding a field means adding its row there.
 struct VerifierConfig {
+  /// How candidates are decided: kMetric (threshold and innovation gate in metres, below) or
+  /// kChi2 (in units of drift: the fields from drift_xy on). See Decision.
+  Decision decision = Decision::kMetric;
   Mode mode = Mode::kFourDof;
   Alignment alignment = Alignment::kSE3;
   /// Accept iff score <= threshold + threshold_per_metre * path_length [m], where
@@ -192,6 +207,36 @@ struct VerifierConfig {
   bool anchor_incoming_keyframes = false;
   /// Tolerance on | |q| - 1 | for quaternions handed in.
   double quaternion_tolerance = 1e-3;
+
+  // ---- decision: chi2 (docs/method.md) -------------------------------------------------
+  /// Odometry drift model (core/drift.h): standard deviation per square root of a metre
+  /// travelled, horizontal and vertical translation [m/sqrt(m)] and yaw [rad/sqrt(m)]; every
+  /// keyframe step counts as at least drift_min_step [m] (rotations in place drift too).
+  double drift_xy = 0.05;
+  double drift_z = 0.025;
+  double drift_yaw = 0.2 * M_PI / 180.0;
+  double drift_min_step = 0.05;
+  /// Standard deviation of a loop's relative pose (what PnP on the place returns) [m], [rad].
+  double loop_sigma = 0.05;
+  double loop_sigma_yaw = 1.0 * M_PI / 180.0;
+  /// The gate: reject iff the innovation's Mahalanobis distance d2 (4 dof) exceeds the
+  /// chi-square quantile of this probability.
+  double gate_probability = 0.999;
+  /// The look-alike test: the environment repeats itself lookalike_distance [m] away
+  /// horizontally (aisles, doors) and lookalike_distance_vertical [m] away vertically (floors);
+  /// 0 = no such look-alikes. Reject a candidate when "a look-alike that far away" explains its
+  /// innovation nearly as well as "this is the place": d2(nu - o) - d2(nu) < lookalike_margin
+  /// for some such offset o.
+  double lookalike_distance = 1.5;
+  double lookalike_distance_vertical = 1.5;
+  double lookalike_margin = 2.0;
+  /// Accepted loops at most in the condensed graph (O(anchors) per verification): loops of one
+  /// revisit are merged, then older ones thinned.
+  int max_loop_anchors = 64;
+  /// Scale the drift model's variances to the innovations of the loops accepted so far (a
+  /// robust maximum-likelihood fit, clamped to [1/100, 100]): the user need not know the VIO's
+  /// drift rate exactly.
+  bool calibrate_drift = false;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.

@@ -2,7 +2,11 @@
 
 #include "rover_loop_fusion/core/decision.h"
 
+#include <Eigen/Cholesky>
+
 #include <chrono>
+#include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace rover_loop_fusion {
@@ -73,6 +77,27 @@ Verdict Verifier::verify(const LoopCandidate& c) {
 
   measured.innovation = graph_.innovation(c, qpos, mpos);
   measured.path_length = graph_.pathLength(mpos, qpos);
+  if (usesChi2()) {
+    Eigen::Matrix4d C;
+    int anchors = 0;
+    if (!graph_.relativeCovariance(mpos, qpos, drift_scale_, &C, &anchors))
+      return reject(Reason::kInvalidInput, "no covariance of the relative pose (the condensed graph is singular)");
+    const Eigen::Vector4d nu = graph_.innovationVector(c, qpos, mpos);
+    Chi2Numbers n;
+    const Check test = chi2Test(config_, nu, C + graph_.loopCovariance(), &n);
+    measured.score = n.d2;
+    measured.threshold = n.gate;
+    measured.window_size = anchors;
+    measured.converged = true;
+    if (!test.passed) return reject(test.reason, test.detail);
+    pending_ = Pending();
+    pending_.valid = true;
+    pending_.candidate = c;
+    pending_.revision = graph_.revision();
+    pending_.innovation = nu;
+    pending_.chain_covariance = C / drift_scale_;
+    return withNumbers(Verdict::Accept(c, test.detail), measured, t0);
+  }
   measured.threshold = scoreThreshold(config_, measured.path_length);
   const Check gate = innovationGate(config_, measured.innovation, measured.path_length);
   if (!gate.passed) return reject(gate.reason, gate.detail);
@@ -110,13 +135,22 @@ Status Verifier::commit(const LoopCandidate& c) {
   const Status added = graph_.addLoop(c);
   if (!added) return Status::Error("commit refused: " + added.message);
   pending_.valid = false;
+  size_t qpos = 0, mpos = 0;
+  graph_.find(c.query_index, &qpos);
+  graph_.find(c.match_index, &mpos);
+  if (usesChi2()) {
+    if (reuse) {
+      calibration_.push_back({p.innovation, p.chain_covariance});
+      if (config_.calibrate_drift) recalibrate();
+    }
+    const Status updated = graph_.updateEstimate(qpos, drift_scale_);
+    if (!updated) return Status::Warning("loop committed but the update of the estimate failed (" + updated.message + ")");
+    return Status::Ok();
+  }
   if (reuse) {
     graph_.adopt(p.solution);
     return Status::Ok();
   }
-  size_t qpos = 0, mpos = 0;
-  graph_.find(c.query_index, &qpos);
-  graph_.find(c.match_index, &mpos);
   if (graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) return Status::Ok();  // both fixed
   const TrialSolution s = graph_.solveWindow(mpos, qpos, nullptr, false, config_.max_iterations, 0.0);
   if (!s.summary.finite)  // the loop is in the graph (the host uses it); X keeps its old values
@@ -153,6 +187,45 @@ bool Verifier::estimate(int64_t index, Pose* pose) const {
 std::vector<TrajectoryPoint> Verifier::trajectory() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return graph_.trajectory();
+}
+
+double Verifier::driftScale() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return drift_scale_;
+}
+
+bool Verifier::usesChi2() const {
+  return config_.decision == Decision::kChi2 && config_.mode == Mode::kFourDof;
+}
+
+void Verifier::recalibrate() {
+  // Robust maximum likelihood of one variance scale s of the drift model: each accepted loop's
+  // innovation nu ~ N(0, s C + L) (C: its chain covariance at scale 1, L: the loop's), Huber
+  // on sqrt(d2) (an accepted look-alike cannot drag s far), over a log grid of s.
+  const size_t kMinLoops = 5, kWindow = 200;
+  if (calibration_.size() < kMinLoops) return;
+  const size_t first = calibration_.size() > kWindow ? calibration_.size() - kWindow : 0;
+  const Eigen::Matrix4d L = graph_.loopCovariance();
+  double best = drift_scale_, best_nll = std::numeric_limits<double>::infinity();
+  for (int k = 0; k <= 80; ++k) {
+    const double s = std::exp(std::log(0.01) + k * (std::log(100.0) - std::log(0.01)) / 80.0);
+    double nll = 0.0;
+    for (size_t i = first; i < calibration_.size(); ++i) {
+      const Eigen::Matrix4d S = s * calibration_[i].chain_covariance + L;
+      const Eigen::LLT<Eigen::Matrix4d> llt(S);
+      if (llt.info() != Eigen::Success) continue;
+      const double d2 = calibration_[i].innovation.dot(llt.solve(calibration_[i].innovation));
+      const double r = std::sqrt(std::max(0.0, d2));
+      const double rho = r < 3.0 ? d2 : 6.0 * r - 9.0;
+      const Eigen::Matrix4d Lc = llt.matrixL();
+      nll += 0.5 * rho + Lc.diagonal().array().log().sum();
+    }
+    if (nll < best_nll) {
+      best_nll = nll;
+      best = s;
+    }
+  }
+  drift_scale_ = best;
 }
 
 BatchSolveResult Verifier::solveLikeLoopFusion(int max_iterations) const {

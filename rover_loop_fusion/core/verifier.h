@@ -67,19 +67,33 @@ class Verifier {
   /// For benchmarks and evaluation; does not change the verifier.
   BatchSolveResult solveLikeLoopFusion(int max_iterations = 5) const;
 
+  /// decision chi2: the variance scale of the drift model (1 unless calibrate_drift fitted it).
+  double driftScale() const;
+
  private:
+  bool usesChi2() const;
+  void recalibrate();
   /// The X* of the last verify() that accepted, for commit() to keep.
   struct Pending {
     bool valid = false;
     LoopCandidate candidate;
     uint64_t revision = 0;  ///< the graph's revision it was solved on
     TrialSolution solution;
+    Eigen::Vector4d innovation = Eigen::Vector4d::Zero();  ///< chi2: for the calibration
+    Eigen::Matrix4d chain_covariance = Eigen::Matrix4d::Zero();  ///< chi2, at variance scale 1
+  };
+  /// chi2 + calibrate_drift: what each accepted loop said about the drift.
+  struct CalibrationSample {
+    Eigen::Vector4d innovation;
+    Eigen::Matrix4d chain_covariance;
   };
   std::string config_error_;  // before config_: the constructor validates first
   VerifierConfig config_;
   mutable std::mutex mutex_;
   PoseGraph graph_;
   Pending pending_;
+  double drift_scale_ = 1.0;
+  std::vector<CalibrationSample> calibration_;
 };
 
 }  // namespace core
