@@ -161,6 +161,10 @@ struct PoseGraph::Impl {
     int count;
   };
   std::vector<LoopRep> loopReps(int component) const;
+  std::vector<LoopRep> computeLoopReps(int component) const;
+  /// loopReps() of the last revision asked (they change only when the loops do).
+  mutable uint64_t reps_revision = ~uint64_t(0);
+  mutable std::map<int, std::vector<LoopRep>> reps_cache;
   /// The condensed graph of a component on the loop ends plus `extra` positions, states from
   /// X; sequence 0 held fixed. Fills `anchors` (positions, increasing). False if an edge's
   /// covariance was unusable.
@@ -507,6 +511,9 @@ namespace {
 /// cluster join it: one edge in the condensed graph (the middle loop, with the information of
 /// all of them). A long revisit becomes one edge per kMergeKeyframes.
 constexpr size_t kMergeKeyframes = 10;
+/// A commit re-places the keyframes of a chain only if one of its ends moved more than this.
+constexpr double kSpreadTranslation = 1e-4;  // m
+constexpr double kSpreadYaw = 1e-6;          // rad
 }  // namespace
 
 void PoseGraph::Impl::appendMoments(size_t pos) {
@@ -544,6 +551,16 @@ int PoseGraph::Impl::componentOf(size_t pos) const {
 }
 
 std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::loopReps(int component) const {
+  if (reps_revision != revision) {
+    reps_cache.clear();
+    reps_revision = revision;
+  }
+  auto it = reps_cache.find(component);
+  if (it == reps_cache.end()) it = reps_cache.emplace(component, computeLoopReps(component)).first;
+  return it->second;
+}
+
+std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::computeLoopReps(int component) const {
   std::vector<const Edge*> in;
   for (const Edge& e : loops)
     if (componentOf(e.to) == component) in.push_back(&e);
@@ -648,12 +665,20 @@ void PoseGraph::Impl::spread(int component, const std::vector<size_t>& anchors, 
       if (kfs[anchors[i]].sequence == seq) in.push_back(static_cast<int>(i));
     if (in.empty()) continue;
     std::vector<KeyframeState> now(in.size());
-    for (size_t j = 0; j < in.size(); ++j) now[j] = stateOf(in[j]);
-    rigid(ch.start, anchors[in.front()], anchors[in.front()], now.front());
-    rigid(anchors[in.back()] + 1, end, anchors[in.back()], now.back());
+    std::vector<bool> moved(in.size());
+    for (size_t j = 0; j < in.size(); ++j) {
+      now[j] = stateOf(in[j]);
+      const KeyframeState& old = x[anchors[in[j]]];
+      moved[j] = std::abs(wrapAngle(now[j].yaw - old.yaw)) > kSpreadYaw ||
+                 (Eigen::Vector3d(now[j].t[0] - old.t[0], now[j].t[1] - old.t[1], now[j].t[2] - old.t[2])).norm() > kSpreadTranslation;
+    }
+    if (moved.front()) rigid(ch.start, anchors[in.front()], anchors[in.front()], now.front());
+    if (moved.back()) rigid(anchors[in.back()] + 1, end, anchors[in.back()], now.back());
     for (size_t j = 0; j + 1 < in.size(); ++j) {
       const size_t pa = anchors[in[j]], pb = anchors[in[j + 1]];
-      if (pb > pa + 1) {
+      // A chain whose ends (nearly) stayed keeps its keyframes: far from a new loop, the
+      // estimate barely changes, and this keeps a commit from costing O(keyframes).
+      if (pb > pa + 1 && (moved[j] || moved[j + 1])) {
         // Rigid prediction from a's new state, plus the chain's share of the gap at b.
         const KeyframeState& na = now[j];
         const KeyframeState& nb = now[j + 1];

@@ -76,8 +76,9 @@ Verdict Verifier::verify(const LoopCandidate& c) {
                   "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
 
   measured.innovation = graph_.innovation(c, qpos, mpos);
-  measured.path_length = graph_.pathLength(mpos, qpos);
   if (usesChi2()) {
+    // (No path length: its Dijkstra over every loop end would be the one cost that grows with
+    // the run; the chi2 decision does not use it.)
     Eigen::Matrix4d C;
     int anchors = 0;
     if (!graph_.relativeCovariance(mpos, qpos, drift_scale_, &C, &anchors))
@@ -98,6 +99,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     pending_.chain_covariance = C / drift_scale_;
     return withNumbers(Verdict::Accept(c, test.detail), measured, t0);
   }
+  measured.path_length = graph_.pathLength(mpos, qpos);
   measured.threshold = scoreThreshold(config_, measured.path_length);
   const Check gate = innovationGate(config_, measured.innovation, measured.path_length);
   if (!gate.passed) return reject(gate.reason, gate.detail);
