@@ -192,6 +192,16 @@ struct VerifierConfig {
   bool anchor_incoming_keyframes = false;
   /// Tolerance on | |q| - 1 | for quaternions handed in.
   double quaternion_tolerance = 1e-3;
+  /// Plausibility of the keyframe stream of a live sequence (not of sequence 0, a loaded map).
+  /// A keyframe farther than max_keyframe_jump [m] from the previous keyframe of its sequence,
+  /// or stamped not after it or more than max_stamp_jump [s] after it, is refused (one glitch,
+  /// e.g. x += 1e30 or a stamp of 4e9 s, costs one keyframe, not the session). When
+  /// jump_confirmations consecutive keyframes each follow the one before plausibly, the last of
+  /// them is accepted: after a position jump as the start of a new segment (the VIO relocated:
+  /// no odometry across the jump), after a stamp jump on the new clock.
+  double max_keyframe_jump = 10.0;
+  double max_stamp_jump = 3600.0;
+  int jump_confirmations = 3;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.
