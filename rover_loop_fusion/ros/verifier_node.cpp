@@ -1,5 +1,6 @@
 #include "rover_loop_fusion/ros/verifier_node.h"
 
+#include "rover_loop_fusion/core/parameters.h"
 #include "rover_loop_fusion/ros/params.h"
 
 #include <Eigen/Geometry>
@@ -143,6 +144,11 @@ bool VerifierNode::start(std::string* error) {
   core::VerifierConfig g;  // loop_fusion's graph: its fixed odometry neighbours and Huber loss
   g.mode = p.use_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
   g.anchor_incoming_keyframes = true;
+  // loop_fusion refuses no keyframe jump: its stand-in refuses only what cannot be a pose (the
+  // widest limits of the parameter table); the plugin applies its own limits to every keyframe.
+  g.max_keyframe_jump = core::findParameter("max_keyframe_jump")->max;
+  g.max_stamp_jump = core::findParameter("max_stamp_jump")->max;
+  g.jump_confirmations = static_cast<int>(core::findParameter("jump_confirmations")->min);
   graph_.reset(new core::PoseGraph(g));
 
   odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
@@ -284,6 +290,7 @@ void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg) {
   } else {
     const core::Status s = graph_->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q);
     if (!s.ok) why = s.message;
+    else if (s.warning()) ROS_WARN("[rover] keyframe message %ld: %s", static_cast<long>(index), s.message.c_str());
   }
   if (!why.empty()) {
     ++keyframes_refused_;
