@@ -16,13 +16,11 @@ PKG = "rover_loop_fusion"
 ROOT = rospkg.RosPack().get_path(PKG)
 LAUNCH = os.path.join(ROOT, "launch", "vins_rover.launch")
 VINS_CONFIG = "/path/to/VINS-Fusion/config/euroc/euroc_stereo_imu_config.yaml"
-PARAM_NAMES = [  # rover_loop_fusion::verifierParameterNames(); test_config.cpp checks the YAMLs
+PARAM_NAMES = [  # verifierParameterNames() but the host-derived ones; test_config.cpp checks the YAMLs
     "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "max_innovation",
-    "max_innovation_per_metre", "accept_without_prior",
-    "max_iterations", "time_budget_ms",
+    "max_innovation_per_metre", "max_iterations", "time_budget_ms",
     "function_tolerance", "odometry_neighbours", "loop_huber", "robust_candidate", "window_margin",
-    "max_relative_translation", "max_relative_yaw_deg", "quaternion_tolerance",
-    "anchor_incoming_keyframes"]
+    "max_relative_translation", "max_relative_yaw_deg", "quaternion_tolerance"]
 
 
 def load(*args):
