@@ -147,14 +147,11 @@ void VerifierNode::finish() {
       receiving_ = false;
       inbox.swap(inbox_);
     }
-    const size_t waiting = pending_.size();
+    const size_t waiting = waiting_.size();
     size_t unprocessed_keyframes = 0, unprocessed_candidates = 0;
-    for (auto& it : pending_) {
-      dropWaits(it.second);
-      reject(it.second.msg, -1, -1, "not verified: the node was shut down while the candidate waited for its keyframes",
-             false);
-    }
-    pending_.clear();
+    for (uint64_t id : waiting_.ids())
+      reject(waiting_.take(id), -1, -1, "not verified: the node was shut down while the candidate waited for its "
+             "keyframes", false);
     for (const Incoming& item : inbox) {
       if (item.keyframe) {
         ++unprocessed_keyframes;
@@ -242,12 +239,7 @@ void VerifierNode::onKeyframe(const nav_msgs::Odometry::ConstPtr& msg) {
 void VerifierNode::onCandidate(const LoopCandidate::ConstPtr& msg) {
   guarded("loop candidate message", [&] {
     std::vector<WaitKey> waits;
-    if (tryDecide(*msg, &waits)) return;
-    const uint64_t id = next_pending_++;
-    Pending& p = pending_[id];
-    p.msg = *msg;
-    p.received = ros::WallTime::now();
-    addWaits(id, p, waits);
+    if (!tryDecide(*msg, &waits)) waiting_.add(*msg, ros::WallTime::now().toSec(), waits);
   });
 }
 
@@ -378,44 +370,20 @@ bool VerifierNode::tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* wai
   return true;
 }
 
-void VerifierNode::addWaits(uint64_t id, Pending& p, const std::vector<WaitKey>& waits) {
-  for (const WaitKey& w : waits) {
-    WaitIndex* index = w.by_stamp ? &wait_stamp_ : &wait_index_;
-    p.waits.emplace_back(index, index->emplace(w.key, id));
-  }
-}
-
-void VerifierNode::dropWaits(Pending& p) {
-  for (auto& w : p.waits) w.first->erase(w.second);
-  p.waits.clear();
-}
-
 void VerifierNode::wake(int64_t ns, int64_t index) {
-  if (pending_.empty()) return;
-  std::vector<uint64_t> ids;
-  for (auto it = wait_stamp_.begin(); it != wait_stamp_.end() && it->first <= ns; ++it) ids.push_back(it->second);
-  for (auto it = wait_index_.begin(); it != wait_index_.end() && it->first <= index; ++it) ids.push_back(it->second);
-  std::sort(ids.begin(), ids.end());  // arrival order
-  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
-  for (uint64_t id : ids) {
-    auto it = pending_.find(id);
-    if (it == pending_.end()) continue;
-    dropWaits(it->second);
-    const LoopCandidate msg = it->second.msg;  // copy: deciding publishes, the entry may go
+  if (waiting_.empty()) return;
+  for (uint64_t id : waiting_.wake(ns, index)) {  // in arrival order
     std::vector<WaitKey> waits;
-    if (tryDecide(msg, &waits)) pending_.erase(it);
-    else addWaits(id, it->second, waits);
+    if (tryDecide(waiting_.get(id), &waits)) waiting_.take(id);
+    else waiting_.rewait(id, waits);
   }
 }
 
 void VerifierNode::expire() {
-  const ros::WallTime now = ros::WallTime::now();
-  while (!pending_.empty()) {
-    auto it = pending_.begin();  // the oldest: arrival order is waiting order
-    if ((now - it->second.received).toSec() <= params_.candidate_timeout) return;
-    dropWaits(it->second);
-    const LoopCandidate msg = it->second.msg;
-    pending_.erase(it);
+  const double deadline = ros::WallTime::now().toSec() - params_.candidate_timeout;
+  uint64_t id;
+  while (waiting_.oldestBefore(deadline, &id)) {  // arrival order is waiting order
+    const LoopCandidate msg = waiting_.take(id);
     int64_t q = -1, m = -1;
     std::string why;
     resolve(msg.query_index, msg.query_stamp, "query", &q, &why);
@@ -553,7 +521,7 @@ void VerifierNode::optimizeAndPublish(Optimize::Response* out) {
   out->success = solved.ok;
   out->keyframe_messages = static_cast<uint32_t>(next_index_);
   out->keyframes = static_cast<uint32_t>(trajectory.size());
-  out->candidates_waiting = static_cast<uint32_t>(pending_.size());
+  out->candidates_waiting = static_cast<uint32_t>(waiting_.size());
   out->verdicts = static_cast<uint32_t>(host_.output().published());
   out->loops = static_cast<uint32_t>(graph_->loopCount());
   std::ostringstream s;

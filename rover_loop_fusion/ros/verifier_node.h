@@ -42,6 +42,7 @@
 #include "rover_loop_fusion/Optimize.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/ros/verifier_host.h"
+#include "rover_loop_fusion/ros/waiting_candidates.h"
 
 #include <nav_msgs/Odometry.h>
 #include <ros/callback_queue.h>
@@ -98,18 +99,7 @@ class VerifierNode {
   void drainInbox();
 
  private:
-  typedef std::multimap<int64_t, uint64_t> WaitIndex;
-  /// What a waiting candidate waits for: a keyframe at a stamp (wait_stamp_) or a number
-  /// (wait_index_).
-  struct WaitKey {
-    bool by_stamp;
-    int64_t key;
-  };
-  struct Pending {
-    LoopCandidate msg;
-    ros::WallTime received;  // when the node took it from the inbox
-    std::vector<std::pair<WaitIndex*, WaitIndex::iterator>> waits;  // its entries (query, maybe match)
-  };
+  typedef WaitingCandidates<LoopCandidate>::Wait WaitKey;
   enum class Resolution { kFound, kWait, kInvalid };
   /// A message as received: exactly one of the two is set.
   struct Incoming {
@@ -136,8 +126,6 @@ class VerifierNode {
   /// wait for its query keyframe (and maybe its match): false, with what it waits for.
   bool tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits);
   WaitKey waitKey(int64_t index, const ros::Time& stamp) const;
-  void addWaits(uint64_t id, Pending& p, const std::vector<WaitKey>& waits);
-  void dropWaits(Pending& p);
   /// Re-examines the waiting candidates that a keyframe with stamp `ns` / number `index` may
   /// have resolved, in arrival order.
   void wake(int64_t ns, int64_t index);
@@ -188,11 +176,8 @@ class VerifierNode {
   bool have_keyframe_ = false;
   int64_t newest_stamp_ns_ = 0;  // newest stamp of a keyframe in the graph
 
-  // Candidates waiting for their query keyframe, by arrival; indexed by what they wait for.
-  std::map<uint64_t, Pending> pending_;
-  WaitIndex wait_stamp_;  // (stamp - tolerance) [ns] of a keyframe it waits for -> pending id
-  WaitIndex wait_index_;  // number of a keyframe it waits for -> pending id
-  uint64_t next_pending_ = 0;
+  // Candidates waiting for their keyframes (received: when the node took them from the inbox).
+  WaitingCandidates<LoopCandidate> waiting_;
 
   bool changed_ = false;  // keyframes or loops since the last optimisation
   size_t keyframes_refused_ = 0;
