@@ -3,8 +3,8 @@
 // every few milliseconds under the keyframe-list mutex and ROS spinner threads deliver
 // messages, including the verdicts and markers the adapter publishes. The test checks that
 // every candidate gets exactly one verdict on the topic and that the has_loop decisions
-// match them; built with -DROVER_TSAN=ON and run by hand it is the ThreadSanitizer stress
-// test (README "Hardening").
+// match them. scripts/sanitize.sh tsan (part of scripts/test.sh) also runs it built with
+// -DROVER_TSAN=ON: the ThreadSanitizer stress test of the adapter.
 #include "rover_loop_fusion/LoopVerdict.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
