@@ -1,5 +1,7 @@
 #include "rover_loop_fusion/ros/verdict_log.h"
 
+#include "rover_loop_fusion/ros/guarded.h"
+
 #include <ros/console.h>
 
 #include <fcntl.h>
@@ -115,8 +117,8 @@ bool VerdictLog::open(const std::string& path, const std::string& header, std::s
 
 void VerdictLog::append(const std::string& row) noexcept {
   if (!state_ || !writer_.joinable()) return;
-  try {
-    State& s = *state_;
+  State& s = *state_;
+  guarded("verdict log: queueing a row", [&] {
     {
       std::lock_guard<std::mutex> lock(s.mutex);
       ++s.stats.appended;
@@ -129,8 +131,7 @@ void VerdictLog::append(const std::string& row) noexcept {
       s.queue.push_back(row + "\n");
     }
     s.wake.notify_one();
-  } catch (...) {
-  }
+  });
 }
 
 size_t VerdictLog::flush(double timeout_s) {
