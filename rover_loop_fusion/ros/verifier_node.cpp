@@ -73,15 +73,19 @@ bool VerifierNode::start(std::string* error) {
   r.number("candidate_timeout", &p.candidate_timeout, 0.0, 86400.0, "s");
   r.number("stamp_tolerance", &p.stamp_tolerance, 0.0, 0.5, "s");
   r.number("optimize_period", &p.optimize_period, 0.0, 86400.0, "s");
-  if (p.optimize_period > 0.0 && p.optimize_period < 0.1)
-    r.error("optimize_period", "must be 0 (on ~optimize only) or at least 0.1 s (got " +
-                                   std::to_string(p.optimize_period) + ")");
+  if (p.optimize_period > 0.0 && p.optimize_period < 0.1) {
+    std::ostringstream got;
+    got << p.optimize_period;
+    r.error("optimize_period", "must be 0 (on ~optimize only) or at least 0.1 s (got " + got.str() + ")");
+  }
   r.integer("optimize_iterations", &p.optimize_iterations, 1, 1000);
   r.integer("queue_size", &p.queue_size, 1, 10000000);
-  std::string why;
-  for (const char* key : {"keyframe_topic", "candidate_topic"}) {
-    const std::string& topic = key[0] == 'k' ? p.keyframe_topic : p.candidate_topic;
-    if (!topic.empty() && !ros::names::validate(topic, why)) r.error(key, "is not a valid topic name: " + why);
+  const std::pair<const char*, const std::string*> topics[] = {{"keyframe_topic", &p.keyframe_topic},
+                                                               {"candidate_topic", &p.candidate_topic}};
+  for (const auto& topic : topics) {
+    std::string why;
+    if (!topic.second->empty() && !ros::names::validate(*topic.second, why))
+      r.error(topic.first, "is not a valid topic name: " + why);
   }
   HostInfo info;
   info.uses_imu = p.use_imu;
@@ -477,7 +481,10 @@ void VerifierNode::onWatchdog(const ros::WallTimerEvent&) {
     if (ros::master::execute("getParam", args, result, payload, false) &&
         payload.getType() == XmlRpc::XmlRpcValue::TypeString)
       run_id = static_cast<std::string>(payload);
-    const bool restarted = run_id_.empty() ? master_lost_ : run_id != run_id_;
+    // A new /run_id is a new master; without one to compare, coming back after being
+    // unreachable counts as a restart.
+    const bool restarted =
+        !run_id_.empty() && !run_id.empty() ? run_id != run_id_ : run_id_.empty() && master_lost_;
     if (!restarted) {
       if (master_lost_) ROS_INFO("[rover] the ROS master is reachable again");
       master_lost_ = false;
