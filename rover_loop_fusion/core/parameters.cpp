@@ -112,8 +112,11 @@ std::vector<Parameter> makeTable() {
   alignment.get = [](const C& c) { return ParameterValue::Text(toString(c.alignment)); };
   alignment.set = [](C* c, const ParameterValue& v, bool) { parseAlignment(v.text, &c->alignment); };
   t.push_back(alignment);
-  t.push_back(boolean("accept_without_prior", &C::accept_without_prior,
-                      "verdict for candidates between sequences nothing connects yet (no trajectory prior)"));
+  Parameter no_prior = boolean("accept_without_prior", &C::accept_without_prior,
+                               "verdict for candidates between sequences nothing connects yet (no trajectory "
+                               "prior); set by the host from ~relocalisation");
+  no_prior.host_set = true;
+  t.push_back(no_prior);
   // The trial optimisation.
   t.push_back(integer("max_iterations", "", &C::max_iterations, 1, 1000,
                       "trial solve iteration limit; hitting it rejects (not_converged)"));
@@ -138,9 +141,11 @@ std::vector<Parameter> makeTable() {
                       "candidates with a larger relative yaw are invalid input"));
   t.push_back(number("quaternion_tolerance", "", &C::quaternion_tolerance, 0.0, 0.1, true,
                      "allowed | |q| - 1 | of the quaternions handed in"));
-  t.push_back(boolean("anchor_incoming_keyframes", &C::anchor_incoming_keyframes,
-                      "poses arrive in raw per-session VIO frames and the verifier applies the sequence "
-                      "shift itself (rover_verifier_node; false with loop_fusion)"));
+  Parameter anchor = boolean("anchor_incoming_keyframes", &C::anchor_incoming_keyframes,
+                             "poses arrive in raw per-session VIO frames and the verifier applies the sequence "
+                             "shift itself; set by the host (rover_verifier_node: true; loop_fusion: false)");
+  anchor.host_set = true;
+  t.push_back(anchor);
   t.push_back(number("max_keyframe_jump", "m", &C::max_keyframe_jump, 0.0, 1000.0, true,
                      "a keyframe farther from the previous one of its sequence is refused (a glitch), "
                      "unless jump_confirmations keyframes confirm it (a relocation: a new segment)"));
@@ -324,7 +329,7 @@ bool assignParameter(const Parameter& p, const ParameterValue& value, VerifierCo
 std::string describe(const VerifierConfig& config) {
   std::string s;
   for (const Parameter& p : verifierParameters())
-    s += (s.empty() ? "" : ", ") + p.name + " " + withUnit(p.get(config).toString(), p.unit);
+    s += (s.empty() ? "" : " ") + p.name + "=" + p.get(config).toString();
   return s;
 }
 
