@@ -188,7 +188,7 @@ std::string PoseGraph::Impl::implausibleStep(const Keyframe& a, const Keyframe& 
   if (!(dt > 0.0) || !(dt <= cfg.max_stamp_jump)) {
     if (!s.str().empty()) s << "; ";
     if (!(dt > 0.0))
-      s << "stamp " << b.stamp << " not after the previous keyframe's " << a.stamp << " in sequence " << a.sequence;
+      s << "out of order: stamp " << b.stamp << " not after the previous keyframe's " << a.stamp << " in sequence " << a.sequence;
     else
       s << "stamp " << b.stamp << " is " << dt << " s after keyframe " << a.index << "'s (max_stamp_jump "
         << cfg.max_stamp_jump << " s)";
