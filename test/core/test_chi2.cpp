@@ -58,7 +58,9 @@ Outcome runScene(Verifier& v, const sim::Scene& s) {
       EXPECT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
     }
     const Verdict vd = v.verify(c.candidate);
-    if (vd.accepted) EXPECT_TRUE(v.commit(c.candidate).ok);
+    if (vd.accepted) {
+      EXPECT_TRUE(v.commit(c.candidate).ok);
+    }
     if (c.is_true) {
       (vd.accepted ? r.tp : r.fn)++;
     } else {
