@@ -186,6 +186,20 @@ std::vector<Parameter> makeTable() {
                      "much (difference of Mahalanobis distances, 2 ln of the likelihood ratio)"));
   t.push_back(integer("max_loop_anchors", "", &C::max_loop_anchors, 2, 100000,
                       "accepted loops (revisits merged) at most in the condensed graph: bounds the cost"));
+  // Holding and confirming (core/verifier.h: takeDecisions).
+  t.push_back(integer("confirm_count", "", &C::confirm_count, 2, 100,
+                      "held candidates of one revisit that must agree with each other to be released"));
+  t.push_back(integer("confirm_window", "keyframes", &C::confirm_window, 1, 100000,
+                      "a held candidate not confirmed within this many keyframes is dropped; also how close "
+                      "(query and match) candidates of one revisit are"));
+  t.push_back(number("hold_sigma", "m", &C::hold_sigma, 0.0, 1000.0, false,
+                     "chi2: hold candidates while the relative position's largest standard deviation exceeds "
+                     "this (the prior alone too weak); 0: never hold"));
+  Parameter confirm = boolean("confirm_without_prior", &C::confirm_without_prior,
+                              "hold candidates between unconnected sequences and release them when confirmed; "
+                              "set by the host (relocalisation policy)");
+  confirm.host_set = true;
+  t.push_back(confirm);
   t.push_back(boolean("calibrate_drift", &C::calibrate_drift,
                       "scale the drift model to the innovations of the accepted loops (robust fit)"));
   return t;

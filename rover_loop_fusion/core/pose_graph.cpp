@@ -1027,6 +1027,27 @@ bool PoseGraph::relativeCovariance(size_t match_pos, size_t query_pos, double va
 
 Eigen::Matrix4d PoseGraph::loopCovariance() const { return impl_->loopCovariance(); }
 
+bool PoseGraph::chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* cov) const {
+  const Impl& m = *impl_;
+  if (from > to || to >= m.kfs.size() || m.kfs[from].segment != m.kfs[to].segment) return false;
+  if (from == to) {
+    cov->setZero();
+    return true;
+  }
+  const Impl::SequenceChain& ch = m.chains.at(m.kfs[from].segment);
+  // In from's own frame: the same whether rotated by X's yaw correction or not (VIO, like the moments).
+  *cov = variance_scale * ch.moments.relative(from - ch.start, to - ch.start, m.kfs[from].vio.q.toRotationMatrix());
+  return true;
+}
+
+int PoseGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
+
+bool PoseGraph::estimateAt(size_t position, Pose* pose) const {
+  if (position >= impl_->kfs.size()) return false;
+  *pose = impl_->poseFromState(impl_->x[position], impl_->kfs[position]);
+  return true;
+}
+
 Eigen::Vector4d PoseGraph::innovationVector(const LoopCandidate& c, size_t qpos, size_t mpos) const {
   const Impl& m = *impl_;
   const KeyframeState& xm = m.x[mpos];

@@ -84,6 +84,8 @@ class PoseGraph {
   /// Position (0 = oldest) of the keyframe with this index; false if unknown.
   bool find(int64_t index, size_t* position) const;
   int sequenceAt(size_t position) const;
+  /// The segment of a keyframe (odometry joins only keyframes of one segment).
+  int segmentAt(size_t position) const;
 
   // ---- loops --------------------------------------------------------------------------------
   /// Empty if the candidate can be used as a loop edge (known keyframes, match older than
@@ -101,6 +103,8 @@ class PoseGraph {
 
   // ---- the estimate X -------------------------------------------------------------------------
   bool estimate(int64_t index, Pose* pose) const;
+  /// X of the keyframe at `position`; false if there is none.
+  bool estimateAt(size_t position, Pose* pose) const;
   std::vector<TrajectoryPoint> trajectory() const;
   /// |t_meas - t_X|: where the candidate puts the query in the match's frame vs where X has it [m].
   double innovation(const LoopCandidate& c, size_t query_pos, size_t match_pos) const;
@@ -141,6 +145,9 @@ class PoseGraph {
   /// anchors used in *anchors. False if the two are not tied together (or 6-DoF).
   bool relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
                           Eigen::Matrix4d* covariance, int* anchors = nullptr) const;
+  /// Covariance of the pose of keyframe `to` relative to `from` (from < to, one segment) along
+  /// the odometry alone (no loops), translation in `from`'s frame; false otherwise.
+  bool chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* covariance) const;
   /// Covariance of a loop's relative pose (loop_sigma, loop_sigma_yaw).
   Eigen::Matrix4d loopCovariance() const;
   /// The candidate's relative pose minus what X predicts: translation in the match's frame, yaw.

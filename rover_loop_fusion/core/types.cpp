@@ -16,6 +16,9 @@ const char* toString(Reason reason) {
     case Reason::kInnovationAboveBound: return "innovation_above_bound";
     case Reason::kInconsistentWithDrift: return "inconsistent_with_drift";
     case Reason::kLookalikeCloser: return "lookalike_closer";
+    case Reason::kDeferred: return "deferred";
+    case Reason::kUnconfirmed: return "unconfirmed";
+    case Reason::kRevoked: return "revoked";
   }
   return "invalid_input";
 }
@@ -67,6 +70,17 @@ Verdict Verdict::Accept(const LoopCandidate& c, std::string detail, Reason reaso
   v.match_index = c.match_index;
   v.accepted = true;
   v.reason = reason;
+  v.detail = std::move(detail);
+  return v;
+}
+
+Verdict Verdict::Defer(const LoopCandidate& c, std::string detail) {
+  Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = false;
+  v.deferred = true;
+  v.reason = Reason::kDeferred;
   v.detail = std::move(detail);
   return v;
 }

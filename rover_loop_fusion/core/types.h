@@ -41,6 +41,9 @@ enum class Reason {
   kTimeBudgetExceeded,   ///< the solve ran past config.time_budget_ms
   kInconsistentWithDrift, ///< chi2: the innovation's Mahalanobis distance exceeds the gate
   kLookalikeCloser,      ///< chi2: a look-alike place at lookalike_distance explains it better
+  kDeferred,             ///< held: neither accepted nor rejected yet; a LoopDecision follows
+  kUnconfirmed,          ///< a held candidate that was not confirmed (in time, or a rival won)
+  kRevoked,              ///< an accepted loop that a larger consistent group contradicted
   kInnovationAboveBound, ///< the candidate disagrees with the estimate by more than the drift
                          ///< over the path between the two keyframes can explain (no solve)
 };
@@ -82,6 +85,9 @@ struct Verdict {
   int64_t query_index = -1;
   int64_t match_index = -1;
   bool accepted = false;
+  /// The candidate is held (reason kDeferred, accepted false): the host must not use the loop
+  /// now; Verifier::takeDecisions() says later whether it was released or dropped.
+  bool deferred = false;
   Reason reason = Reason::kInvalidInput;
   double score = std::numeric_limits<double>::quiet_NaN();  ///< RMSE of aligned positions [m]
   double threshold = std::numeric_limits<double>::quiet_NaN();  ///< effective, see VerifierConfig
@@ -104,6 +110,8 @@ struct Verdict {
                         Reason reason = Reason::kAccepted);
   /// A verdict that keeps the candidate's loop out, with why (kAccepted is taken as kInvalidInput).
   static Verdict Reject(Reason reason, const LoopCandidate& candidate, std::string detail);
+  /// A verdict that holds the candidate (reason kDeferred, deferred true, accepted false).
+  static Verdict Defer(const LoopCandidate& candidate, std::string detail);
 };
 
 /// One keyframe of a trajectory, as reported by Verifier::trajectory(), PoseGraph::trajectory()
@@ -243,6 +251,21 @@ struct VerifierConfig {
   /// Accepted loops at most in the condensed graph (O(anchors) per verification): loops of one
   /// revisit are merged, then older ones thinned.
   int max_loop_anchors = 64;
+  /// Holding and confirming (both decisions; Verifier::takeDecisions): a held candidate is
+  /// released once confirm_count held candidates of the same revisit (query and match each
+  /// within confirm_window keyframes) agree with each other (every pair: the cycle
+  /// loop - odometry - loop - odometry closes within chi-square gate_probability) and no rival
+  /// group of at least half its size contradicts them; dropped if not confirmed within
+  /// confirm_window keyframes after it arrived.
+  int confirm_count = 3;
+  int confirm_window = 40;
+  /// chi2: hold a candidate that passes the tests while the relative position's largest
+  /// standard deviation exceeds hold_sigma [m] (the prior alone is too weak to trust a single
+  /// candidate); 0 = never hold.
+  double hold_sigma = 0.0;
+  /// Candidates between sequences nothing connects yet (relocalisation, map merging): hold and
+  /// release them once confirmed (takes precedence over accept_without_prior). Set by the host.
+  bool confirm_without_prior = false;
   /// Scale the drift model's variances to the innovations of the loops accepted so far (a
   /// robust maximum-likelihood fit, clamped to [1/100, 100]): the user need not know the VIO's
   /// drift rate exactly.

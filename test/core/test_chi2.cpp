@@ -238,3 +238,164 @@ TEST(Chi2Verifier, CalibrationFindsTheDriftTheUserUnderstated) {
   EXPECT_GT(v.driftScale(), 3.0);
   EXPECT_LT(v.driftScale(), 40.0);
 }
+
+// ---- held candidates: the protocol of core/verifier.h (verify -> deferred, takeDecisions) ----
+
+namespace {
+
+/// The corridor as two sessions: lap 1 is sequence 1, laps 2-3 are sequence 2 with their VIO
+/// poses in a frame of their own (a new VIO start), so that nothing connects the two until a
+/// loop between them is accepted. Candidates keep their keyframe indices.
+struct Sessions {
+  sim::Scene scene;
+  size_t lap = 0;  // keyframes per lap: the first keyframe of sequence 2
+};
+
+Sessions twoSessions(uint32_t seed) {
+  sim::LapsOptions o = corridorOptions(seed);
+  Sessions s;
+  s.scene = sim::makeLapsScene(o);
+  s.lap = s.scene.keyframes.size() / o.laps;
+  const Eigen::Isometry3d shift = Eigen::Translation3d(5.0, -3.0, 0.2) * Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ());
+  for (size_t i = s.lap; i < s.scene.keyframes.size(); ++i) {
+    core::Pose& p = s.scene.keyframes[i].vio;
+    p.t = shift * p.t;
+    p.q = Eigen::Quaterniond(shift.linear()) * p.q;
+  }
+  return s;
+}
+
+void addSessionsUpTo(Verifier& v, const Sessions& s, int64_t last, size_t* next) {
+  for (; *next < s.scene.keyframes.size() && s.scene.keyframes[*next].index <= last; ++*next) {
+    const sim::SimKeyframe& kf = s.scene.keyframes[*next];
+    ASSERT_TRUE(v.addKeyframe(kf.index, kf.stamp, *next < s.lap ? 1 : 2, kf.vio.t, kf.vio.q).ok);
+  }
+}
+
+}  // namespace
+
+TEST(HeldCandidates, RelocalisationIsHeldUntilConfirmedThenReleasedAndCommitted) {
+  const Sessions s = twoSessions(7);
+  core::VerifierConfig c = chi2Config(corridorOptions(7));
+  c.confirm_without_prior = true;
+  Verifier v(c);
+  size_t next = 0;
+  int deferred = 0, released = 0, accepted_after = 0, false_accepted = 0;
+  for (const sim::SimCandidate& sc : s.scene.candidates) {
+    if (!sc.is_true) continue;  // true relocalisations only here
+    addSessionsUpTo(v, s, sc.candidate.query_index, &next);
+    const Verdict vd = v.verify(sc.candidate);
+    if (vd.deferred) {
+      ++deferred;
+      EXPECT_FALSE(vd.accepted);
+      EXPECT_EQ(vd.reason, Reason::kDeferred);
+    } else if (vd.accepted) {
+      ++accepted_after;
+      EXPECT_TRUE(v.commit(sc.candidate).ok);
+    }
+    for (const core::LoopDecision& d : v.takeDecisions()) {
+      EXPECT_EQ(d.kind, core::LoopDecision::Kind::kRelease) << d.verdict.detail;
+      EXPECT_TRUE(d.verdict.accepted);
+      ++released;
+    }
+  }
+  EXPECT_EQ(deferred, c.confirm_count) << "held until confirm_count agree, then the prior decides";
+  EXPECT_EQ(released, c.confirm_count);
+  EXPECT_GT(accepted_after, 10);
+  EXPECT_EQ(v.heldCount(), 0u);
+  EXPECT_EQ(v.loopCount(), static_cast<size_t>(released + accepted_after)) << "released loops are committed by the verifier";
+  (void)false_accepted;
+}
+
+TEST(HeldCandidates, AnUnconfirmedRelocalisationIsDroppedAfterTheWindow) {
+  const Sessions s = twoSessions(8);
+  core::VerifierConfig c = chi2Config(corridorOptions(8));
+  c.confirm_without_prior = true;
+  c.confirm_window = 20;
+  Verifier v(c);
+  size_t next = 0;
+  const sim::SimCandidate* lookalike = nullptr;
+  for (const sim::SimCandidate& sc : s.scene.candidates)
+    if (!sc.is_true && static_cast<size_t>(sc.candidate.match_index) < s.lap &&
+        static_cast<size_t>(sc.candidate.query_index) >= s.lap) {
+      lookalike = &sc;
+      break;
+    }
+  ASSERT_NE(lookalike, nullptr);
+  addSessionsUpTo(v, s, lookalike->candidate.query_index, &next);
+  EXPECT_TRUE(v.verify(lookalike->candidate).deferred);
+  EXPECT_EQ(v.heldCount(), 1u);
+  EXPECT_TRUE(v.takeDecisions().empty());
+  addSessionsUpTo(v, s, lookalike->candidate.query_index + c.confirm_window + 1, &next);
+  const std::vector<core::LoopDecision> d = v.takeDecisions();
+  ASSERT_EQ(d.size(), 1u);
+  EXPECT_EQ(d[0].kind, core::LoopDecision::Kind::kDrop);
+  EXPECT_EQ(d[0].verdict.reason, Reason::kUnconfirmed);
+  EXPECT_EQ(d[0].candidate.query_index, lookalike->candidate.query_index);
+  EXPECT_EQ(v.heldCount(), 0u);
+  EXPECT_EQ(v.loopCount(), 0u);
+  EXPECT_TRUE(v.takeDecisions().empty()) << "each decision is handed over once";
+}
+
+TEST(HeldCandidates, AgreeingLookalikesAreNotConfirmedWithTrueLoopsOfTheSameStretch) {
+  // A true revisit and a look-alike stretch 1.5 m away, interleaved: the pairwise cycle test
+  // keeps them in separate groups; the true one (more members) is released, the rival dropped.
+  const Sessions s = twoSessions(9);
+  core::VerifierConfig c = chi2Config(corridorOptions(9));
+  c.confirm_without_prior = true;
+  Verifier v(c);
+  size_t next = 0;
+  int true_released = 0, false_released = 0, seen = 0, false_seen = 0;
+  for (const sim::SimCandidate& sc : s.scene.candidates) {
+    if (static_cast<size_t>(sc.candidate.query_index) < s.lap) continue;
+    addSessionsUpTo(v, s, sc.candidate.query_index, &next);
+    const Verdict vd = v.verify(sc.candidate);
+    ++seen;
+    if (!sc.is_true) ++false_seen;
+    if (vd.accepted) {
+      EXPECT_TRUE(v.commit(sc.candidate).ok);
+    }
+    for (const core::LoopDecision& d : v.takeDecisions()) {
+      if (d.kind != core::LoopDecision::Kind::kRelease) continue;
+      const bool is_true = std::any_of(s.scene.candidates.begin(), s.scene.candidates.end(), [&](const sim::SimCandidate& x) {
+        return x.is_true && x.candidate.query_index == d.candidate.query_index && x.candidate.match_index == d.candidate.match_index;
+      });
+      (is_true ? true_released : false_released)++;
+    }
+    if (v.loopCount() > 0 && v.heldCount() == 0) break;  // connected: the rest is the gate's
+  }
+  EXPECT_GE(true_released, c.confirm_count);
+  EXPECT_EQ(false_released, 0);
+  EXPECT_GT(false_seen, 0) << "look-alikes were held too (" << seen << " candidates)";
+}
+
+TEST(HeldCandidates, WeakPriorHoldsUntilTheRevisitAgrees) {
+  const sim::LapsOptions o = corridorOptions(7);
+  core::VerifierConfig c = chi2Config(o);
+  c.hold_sigma = 0.05;  // nearly always too weak: hold and confirm
+  Verifier v(c);
+  const sim::Scene s = sim::makeLapsScene(o);
+  size_t next = 0;
+  int deferred = 0, released = 0, dropped = 0;
+  for (const sim::SimCandidate& sc : s.candidates) {
+    for (; next < s.keyframes.size() && s.keyframes[next].index <= sc.candidate.query_index; ++next)
+      ASSERT_TRUE(v.addKeyframe(s.keyframes[next].index, s.keyframes[next].stamp, 1, s.keyframes[next].vio.t, s.keyframes[next].vio.q).ok);
+    const Verdict vd = v.verify(sc.candidate);
+    deferred += vd.deferred;
+    if (vd.accepted) {
+      EXPECT_TRUE(v.commit(sc.candidate).ok);
+    }
+    for (const core::LoopDecision& d : v.takeDecisions()) {
+      if (d.kind == core::LoopDecision::Kind::kRelease) {
+        ++released;
+        EXPECT_TRUE(sc.is_true || std::any_of(s.candidates.begin(), s.candidates.end(), [&](const sim::SimCandidate& x) {
+          return x.is_true && x.candidate.query_index == d.candidate.query_index;
+        })) << "released a false candidate " << d.candidate.query_index;
+      } else {
+        ++dropped;
+      }
+    }
+  }
+  EXPECT_GT(deferred, 10);
+  EXPECT_GT(released, 0.8 * deferred);
+}
