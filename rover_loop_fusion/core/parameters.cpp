@@ -188,10 +188,10 @@ std::vector<Parameter> makeTable() {
                       "accepted loops (revisits merged) at most in the condensed graph: bounds the cost"));
   // Holding and confirming (core/verifier.h: takeDecisions).
   t.push_back(integer("confirm_count", "", &C::confirm_count, 2, 100,
-                      "held candidates of one revisit that must agree with each other to be released"));
+                      "held candidates of one stretch that must agree with each other to be released"));
   t.push_back(integer("confirm_window", "keyframes", &C::confirm_window, 1, 100000,
                       "a held candidate not confirmed within this many keyframes is dropped; also how close "
-                      "(query and match) candidates of one revisit are"));
+                      "the queries of one stretch are"));
   t.push_back(number("hold_sigma", "m", &C::hold_sigma, 0.0, 1000.0, false,
                      "chi2: hold candidates while the relative position's largest standard deviation exceeds "
                      "this (the prior alone too weak); 0: never hold"));

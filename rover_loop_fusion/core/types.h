@@ -252,8 +252,8 @@ struct VerifierConfig {
   /// revisit are merged, then older ones thinned.
   int max_loop_anchors = 64;
   /// Holding and confirming (both decisions; Verifier::takeDecisions): a held candidate is
-  /// released once confirm_count held candidates of the same revisit (query and match each
-  /// within confirm_window keyframes) agree with each other (every pair: the cycle
+  /// released once confirm_count held candidates of the same stretch (queries within
+  /// confirm_window keyframes, same segments) agree with each other (every pair: the cycle
   /// loop - odometry - loop - odometry closes within chi-square gate_probability) and no rival
   /// group of at least half its size contradicts them; dropped if not confirmed within
   /// confirm_window keyframes after it arrived.

@@ -307,7 +307,7 @@ void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, bool no_pr
     const size_t k = static_cast<size_t>(config_.confirm_count);
     bool ok = true;
     for (size_t i = g.size() > k ? g.size() - k : 0; ok && i < g.size(); ++i)
-      ok = near(g[i].query_pos, qpos) && near(g[i].match_pos, mpos) && consistent(g[i], h);
+      ok = near(g[i].query_pos, qpos) && consistent(g[i], h);
     if (ok) {
       g.push_back(h);
       joined = true;
