@@ -247,7 +247,7 @@ struct VerifierConfig {
   /// for some such offset o.
   double lookalike_distance = 1.5;
   double lookalike_distance_vertical = 1.5;
-  double lookalike_margin = 2.0;
+  double lookalike_margin = 4.0;
   /// Accepted loops at most in the condensed graph (O(anchors) per verification): loops of one
   /// revisit are merged, then older ones thinned.
   int max_loop_anchors = 64;
