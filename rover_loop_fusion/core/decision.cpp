@@ -2,6 +2,9 @@
 
 #include "rover_loop_fusion/core/alignment.h"
 
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -70,6 +73,101 @@ Check scoreTest(const SolveSummary& trial, double score, double threshold, int w
   s << "score " << std::fixed << score << (above ? " m > threshold " : " m <= threshold ") << threshold
     << " m over " << window_size << " keyframes";
   if (above) return fail(Reason::kScoreAboveThreshold, s.str());
+  Check passed;
+  passed.detail = s.str();
+  return passed;
+}
+
+double chiSquareQuantile(double p, int dof) {
+  if (!(p > 0.0 && p < 1.0) || dof < 2 || dof % 2 != 0) return std::numeric_limits<double>::quiet_NaN();
+  // CDF of an even dof: 1 - exp(-x/2) sum_{i < dof/2} (x/2)^i / i!  (increasing): bisection.
+  auto cdf = [dof](double x) {
+    double term = 1.0, sum = 1.0;
+    for (int i = 1; i < dof / 2; ++i) {
+      term *= 0.5 * x / i;
+      sum += term;
+    }
+    return 1.0 - std::exp(-0.5 * x) * sum;
+  };
+  double lo = 0.0, hi = 1.0;
+  while (cdf(hi) < p) hi *= 2.0;
+  for (int it = 0; it < 200 && hi - lo > 1e-12 * hi; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (cdf(mid) < p ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+double mahalanobis(const Eigen::Vector4d& nu, const Eigen::Matrix4d& S) {
+  const Eigen::LLT<Eigen::Matrix4d> llt(0.5 * (S + S.transpose()));
+  if (llt.info() != Eigen::Success || !nu.allFinite()) return std::numeric_limits<double>::infinity();
+  const double d2 = nu.dot(llt.solve(nu));
+  return std::isfinite(d2) ? d2 : std::numeric_limits<double>::infinity();
+}
+
+double lookalikeMargin(const Eigen::Vector4d& nu, const Eigen::Matrix4d& S, double horizontal,
+                       double vertical) {
+  const double inf = std::numeric_limits<double>::infinity();
+  if (!(horizontal > 0) && !(vertical > 0)) return inf;
+  const Eigen::LLT<Eigen::Matrix4d> llt(0.5 * (S + S.transpose()));
+  if (llt.info() != Eigen::Success) return inf;
+  const Eigen::Matrix4d A = llt.solve(Eigen::Matrix4d::Identity());
+  const Eigen::Vector4d Anu = A * nu;
+  // d2(nu - o) - d2(nu) = -2 o^T A nu + o^T A o
+  auto delta = [&](const Eigen::Vector4d& o) { return -2.0 * o.dot(Anu) + o.dot(A * o); };
+  double best = inf;
+  if (vertical > 0) {
+    const Eigen::Vector4d up(0, 0, vertical, 0);
+    best = std::min({best, delta(up), delta(-up)});
+  }
+  if (horizontal > 0) {
+    // A smooth function of the direction on a circle: a fine grid, then golden-section refinement.
+    const int n = 72;
+    auto at = [&](double th) { return delta(Eigen::Vector4d(horizontal * std::cos(th), horizontal * std::sin(th), 0, 0)); };
+    int k_best = 0;
+    double f_best = inf;
+    for (int k = 0; k < n; ++k) {
+      const double f = at(2.0 * M_PI * k / n);
+      if (f < f_best) {
+        f_best = f;
+        k_best = k;
+      }
+    }
+    double a = 2.0 * M_PI * (k_best - 1) / n, b = 2.0 * M_PI * (k_best + 1) / n;
+    const double g = 0.5 * (std::sqrt(5.0) - 1.0);
+    double c = b - g * (b - a), d = a + g * (b - a), fc = at(c), fd = at(d);
+    for (int it = 0; it < 40; ++it) {
+      if (fc < fd) {
+        b = d; d = c; fd = fc; c = b - g * (b - a); fc = at(c);
+      } else {
+        a = c; c = d; fc = fd; d = a + g * (b - a); fd = at(d);
+      }
+    }
+    best = std::min({best, f_best, fc, fd});
+  }
+  return best;
+}
+
+Check chi2Test(const VerifierConfig& config, const Eigen::Vector4d& nu, const Eigen::Matrix4d& S,
+               Chi2Numbers* numbers) {
+  Chi2Numbers& n = *numbers;
+  n.d2 = mahalanobis(nu, S);
+  n.gate = chiSquareQuantile(config.gate_probability, 4);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (S.topLeftCorner<3, 3>() + S.topLeftCorner<3, 3>().transpose()));
+  n.sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
+  n.margin = lookalikeMargin(nu, S, config.lookalike_distance, config.lookalike_distance_vertical);
+  std::ostringstream s;
+  s.precision(3);
+  s << std::fixed << "innovation " << nu.head<3>().norm() << " m, " << std::abs(nu[3]) * 180.0 / M_PI
+    << " deg; Mahalanobis d2 " << n.d2 << (n.d2 <= n.gate ? " <= " : " > ") << n.gate << " (chi2 "
+    << config.gate_probability << "); relative position std up to " << n.sigma << " m";
+  if (!(n.d2 <= n.gate)) return fail(Reason::kInconsistentWithDrift, s.str() + ": more than drift explains");
+  if (std::isfinite(n.margin)) s << "; look-alike margin " << n.margin;
+  if (!(n.margin >= config.lookalike_margin)) {
+    s << " < " << config.lookalike_margin << ": a look-alike " << config.lookalike_distance << " m (horizontal) / "
+      << config.lookalike_distance_vertical << " m (vertical) away explains it as well";
+    return fail(Reason::kLookalikeCloser, s.str());
+  }
   Check passed;
   passed.detail = s.str();
   return passed;

@@ -42,5 +42,35 @@ double deformationScore(const Eigen::Matrix3Xd& before, const Eigen::Matrix3Xd& 
 Check scoreTest(const SolveSummary& trial, double score, double threshold, int window_size,
                 double time_budget_ms);
 
+// ---- decision: chi2 (in units of drift) ---------------------------------------------------
+
+/// The chi-square quantile: x with P(chi2_dof <= x) = p, for even dof (2, 4, 6), p in (0, 1).
+double chiSquareQuantile(double p, int dof);
+
+/// d2 = nu^T S^-1 nu; +inf if S is not positive definite.
+double mahalanobis(const Eigen::Vector4d& nu, const Eigen::Matrix4d& S);
+
+/// How much better "this is the place" explains the innovation than "this is a look-alike
+/// `horizontal` metres away horizontally (any direction) or `vertical` metres away vertically":
+///   min over such offsets o of d2(nu - o) - d2(nu)   (o moves the position only).
+/// +inf when both distances are 0 (no look-alikes) or S is not positive definite.
+double lookalikeMargin(const Eigen::Vector4d& nu, const Eigen::Matrix4d& S, double horizontal,
+                       double vertical);
+
+/// The numbers of the chi2 decision, for the verdict.
+struct Chi2Numbers {
+  double d2 = 0.0;        ///< Mahalanobis distance of the innovation
+  double gate = 0.0;      ///< chi-square quantile of gate_probability (4 dof)
+  double sigma = 0.0;     ///< largest standard deviation of the relative position [m]
+  double margin = 0.0;    ///< lookalikeMargin
+};
+
+/// The chi2 decision on an innovation `nu` (candidate minus estimate; translation in the
+/// match's frame, yaw) with the covariance `S` of the relative pose through the graph plus the
+/// loop's own: passes iff d2 <= gate and the look-alike margin >= lookalike_margin. Fails with
+/// kInconsistentWithDrift or kLookalikeCloser. Fills `numbers`.
+Check chi2Test(const VerifierConfig& config, const Eigen::Vector4d& nu, const Eigen::Matrix4d& S,
+               Chi2Numbers* numbers);
+
 }  // namespace core
 }  // namespace rover_loop_fusion

@@ -87,7 +87,14 @@ Parameter choice(const char* name, std::vector<std::string> choices, const char*
 std::vector<Parameter> makeTable() {
   using C = VerifierConfig;
   std::vector<Parameter> t;
-  // Decision (the innovation gate, then the score; core/decision.h).
+  // How candidates are decided (core/decision.h).
+  Parameter decision = choice("decision", {"metric", "chi2"},
+                              "metric: threshold and innovation gate in metres (the paper's method); chi2: in "
+                              "units of drift (drift_* model, gate_probability, lookalike_*)");
+  decision.get = [](const C& c) { return ParameterValue::Text(toString(c.decision)); };
+  decision.set = [](C* c, const ParameterValue& v, bool) { parseDecision(v.text, &c->decision); };
+  t.push_back(decision);
+  // decision: metric (the innovation gate, then the score).
   t.push_back(number("threshold", "m", &C::threshold, 0.0, 10.0, true,
                      "accept iff the deformation score <= threshold + threshold_per_metre x path length"));
   t.push_back(number("threshold_per_metre", "m/m", &C::threshold_per_metre, 0.0, 1.0, false,
@@ -155,6 +162,46 @@ std::vector<Parameter> makeTable() {
   t.push_back(integer("jump_confirmations", "keyframes", &C::jump_confirmations, 2, 100,
                       "consecutive consistent keyframes that make the verifier accept a position or "
                       "stamp jump instead of refusing it"));
+  // decision: chi2 (the drift model, the gate, the look-alike test; core/drift.h, core/decision.h).
+  t.push_back(number("drift_xy", "m/sqrt(m)", &C::drift_xy, 0.0, 10.0, true,
+                     "odometry drift, horizontal: standard deviation per square root of a metre travelled"));
+  t.push_back(number("drift_z", "m/sqrt(m)", &C::drift_z, 0.0, 10.0, true,
+                     "odometry drift, vertical: standard deviation per square root of a metre travelled"));
+  t.push_back(degrees("drift_yaw_deg", &C::drift_yaw, 0.0, 90.0, true,
+                      "odometry yaw drift: standard deviation [deg] per square root of a metre travelled"));
+  t.push_back(number("drift_min_step", "m", &C::drift_min_step, 0.0, 100.0, true,
+                     "every keyframe step drifts at least as much as one this long (rotations in place)"));
+  t.push_back(number("loop_sigma", "m", &C::loop_sigma, 0.0, 10.0, true,
+                     "standard deviation of a loop's relative translation (per axis)"));
+  t.push_back(degrees("loop_sigma_yaw_deg", &C::loop_sigma_yaw, 0.0, 90.0, true,
+                      "standard deviation of a loop's relative yaw"));
+  t.push_back(number("gate_probability", "", &C::gate_probability, 0.5, 1.0 - 1e-12, false,
+                     "reject iff the innovation's Mahalanobis distance exceeds this chi-square quantile (4 dof)"));
+  t.push_back(number("lookalike_distance", "m", &C::lookalike_distance, 0.0, 1000.0, false,
+                     "the environment repeats this far away horizontally (aisles, doors); 0: no such look-alikes"));
+  t.push_back(number("lookalike_distance_vertical", "m", &C::lookalike_distance_vertical, 0.0, 1000.0, false,
+                     "the environment repeats this far away vertically (floors); 0: no such look-alikes"));
+  t.push_back(number("lookalike_margin", "", &C::lookalike_margin, 0.0, 100.0, false,
+                     "reject unless the place explains the innovation better than any look-alike by this "
+                     "much (difference of Mahalanobis distances, 2 ln of the likelihood ratio)"));
+  t.push_back(integer("max_loop_anchors", "", &C::max_loop_anchors, 2, 100000,
+                      "accepted loops (revisits merged) at most in the condensed graph: bounds the cost"));
+  // Holding and confirming (core/verifier.h: takeDecisions).
+  t.push_back(integer("confirm_count", "", &C::confirm_count, 2, 100,
+                      "held candidates of one stretch that must agree with each other to be released"));
+  t.push_back(integer("confirm_window", "keyframes", &C::confirm_window, 1, 100000,
+                      "a held candidate not confirmed within this many keyframes is dropped; also how close "
+                      "the queries of one stretch are"));
+  t.push_back(number("hold_sigma", "m", &C::hold_sigma, 0.0, 1000.0, false,
+                     "chi2: hold candidates while the relative position's largest standard deviation exceeds "
+                     "this (the prior alone too weak); 0: never hold"));
+  Parameter confirm = boolean("confirm_without_prior", &C::confirm_without_prior,
+                              "hold candidates between unconnected sequences and release them when confirmed; "
+                              "set by the host (relocalisation policy)");
+  confirm.host_set = true;
+  t.push_back(confirm);
+  t.push_back(boolean("calibrate_drift", &C::calibrate_drift,
+                      "scale the drift model to the innovations of the accepted loops (robust fit)"));
   return t;
 }
 

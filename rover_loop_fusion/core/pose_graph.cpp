@@ -1,7 +1,9 @@
 #include "rover_loop_fusion/core/pose_graph.h"
 
 #include "rover_loop_fusion/core/ceres_compat.h"
+#include "rover_loop_fusion/core/condensed.h"
 #include "rover_loop_fusion/core/cost_functions.h"
+#include "rover_loop_fusion/core/drift.h"
 #include "rover_loop_fusion/core/geometry.h"
 
 #include <algorithm>
@@ -91,6 +93,15 @@ struct PoseGraph::Impl {
   std::unique_ptr<compat::ParameterManifold> quaternion_manifold;
   uint64_t revision = 0;
   size_t solves = 0;
+  // Uncertainty (decision chi2): per segment (its keyframes are contiguous positions from
+  // `start`: odometry joins only keyframes of one segment) the prefix moments of the drift
+  // model along its VIO poses.
+  struct SequenceChain {
+    size_t start = 0;
+    ChainMoments moments;
+  };
+  std::map<int, SequenceChain> chains;
+  DriftModel drift;
   Suspect suspect;
   int next_segment = -1;
   bool warned_loaded_map_stamps = false;
@@ -98,7 +109,12 @@ struct PoseGraph::Impl {
   explicit Impl(const VerifierConfig& c)
       : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
         angle_manifold(new compat::AngleManifold()),
-        quaternion_manifold(compat::newQuaternionManifold()) {}
+        quaternion_manifold(compat::newQuaternionManifold()) {
+    drift.sigma_xy = c.drift_xy;
+    drift.sigma_z = c.drift_z;
+    drift.sigma_yaw = c.drift_yaw;
+    drift.min_step = c.drift_min_step;
+  }
 
   bool fourDof() const { return cfg.mode == Mode::kFourDof; }
 
@@ -152,6 +168,34 @@ struct PoseGraph::Impl {
   void adopt(const std::vector<size_t>& positions, const std::vector<KeyframeState>& states);
   /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
   void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos);
+
+  // ---- uncertainty (core/drift.h, core/condensed.h) -----------------------------------
+  void appendMoments(size_t pos);
+  /// After loop_fusion's shift of a sequence: the moments of its segments from the new poses.
+  void rebuildMoments(int sequence);
+  Eigen::Matrix4d loopCovariance() const;
+  /// The accepted loops of a component as condensed-graph edges: loops of one revisit within
+  /// kMergeKeyframes (query and match) merged into one edge with the information of all;
+  /// beyond max_loop_anchors, the newest half kept and the older thinned evenly.
+  struct LoopRep {
+    size_t from, to;
+    const LoopCandidate* loop;
+    int count;
+  };
+  std::vector<LoopRep> loopReps(int component) const;
+  std::vector<LoopRep> computeLoopReps(int component) const;
+  /// loopReps() of the last revision asked (they change only when the loops do).
+  mutable uint64_t reps_revision = ~uint64_t(0);
+  mutable std::map<int, std::vector<LoopRep>> reps_cache;
+  /// The condensed graph of a component on the loop ends plus `extra` positions, states from
+  /// X; sequence 0 held fixed. Fills `anchors` (positions, increasing). False if an edge's
+  /// covariance was unusable.
+  bool condense(int component, const std::vector<size_t>& extra, double variance_scale,
+                CondensedGraph* cg, std::vector<size_t>* anchors) const;
+  int componentOf(size_t pos) const;
+  /// Carries new anchor states to every keyframe of the component: chains between anchors by
+  /// the chain model's conditional mean, the ends rigidly with their anchor.
+  void spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg);
 };
 
 bool PoseGraph::Impl::find(int64_t index, size_t* pos) const {
@@ -501,6 +545,209 @@ void PoseGraph::Impl::anchorSequence(const LoopCandidate& c, size_t qpos, size_t
   }
   seq_shift[seq] = shift;
   seq_anchored[seq] = true;
+  rebuildMoments(seq);
+}
+
+
+// ---- uncertainty ------------------------------------------------------------------------
+
+namespace {
+/// Loops whose query and match are each within this many keyframes of the first loop of a
+/// cluster join it: one edge in the condensed graph (the middle loop, with the information of
+/// all of them). A long revisit becomes one edge per kMergeKeyframes.
+constexpr size_t kMergeKeyframes = 10;
+/// A commit re-places the keyframes of a chain only if one of its ends moved more than this.
+constexpr double kSpreadTranslation = 1e-4;  // m
+constexpr double kSpreadYaw = 1e-6;          // rad
+}  // namespace
+
+void PoseGraph::Impl::appendMoments(size_t pos) {
+  const Keyframe& kf = kfs[pos];
+  auto it = chains.find(kf.segment);
+  if (it == chains.end()) {
+    it = chains.emplace(kf.segment, SequenceChain()).first;
+    it->second.start = pos;
+  }
+  SequenceChain& ch = it->second;
+  const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
+  ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(), drift.stepCovariance(length));
+}
+
+void PoseGraph::Impl::rebuildMoments(int sequence) {
+  for (auto& kv : chains) {
+    if (kfs[kv.second.start].sequence != sequence) continue;
+    const size_t start = kv.second.start, n = kv.second.moments.size();
+    kv.second.moments.clear();
+    for (size_t p = start; p < start + n; ++p) appendMoments(p);
+  }
+}
+
+Eigen::Matrix4d PoseGraph::Impl::loopCovariance() const {
+  Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
+  C(0, 0) = C(1, 1) = C(2, 2) = cfg.loop_sigma * cfg.loop_sigma;
+  C(3, 3) = cfg.loop_sigma_yaw * cfg.loop_sigma_yaw;
+  return C;
+}
+
+int PoseGraph::Impl::componentOf(size_t pos) const {
+  int s = kfs[pos].segment;
+  for (auto it = seg_parent.find(s); it != seg_parent.end() && it->second != s; it = seg_parent.find(s))
+    s = it->second;
+  return s;
+}
+
+std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::loopReps(int component) const {
+  if (reps_revision != revision) {
+    reps_cache.clear();
+    reps_revision = revision;
+  }
+  auto it = reps_cache.find(component);
+  if (it == reps_cache.end()) it = reps_cache.emplace(component, computeLoopReps(component)).first;
+  return it->second;
+}
+
+std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::computeLoopReps(int component) const {
+  std::vector<const Edge*> in;
+  for (const Edge& e : loops)
+    if (componentOf(e.to) == component) in.push_back(&e);
+  std::sort(in.begin(), in.end(), [](const Edge* a, const Edge* b) { return a->to < b->to; });
+  std::vector<std::vector<const Edge*>> clusters;
+  for (const Edge* e : in) {
+    if (!clusters.empty()) {
+      const Edge* head = clusters.back().front();  // a cluster spans at most kMergeKeyframes
+      const size_t dq = e->to - head->to;
+      const size_t dm = e->from > head->from ? e->from - head->from : head->from - e->from;
+      if (dq <= kMergeKeyframes && dm <= kMergeKeyframes) {
+        clusters.back().push_back(e);
+        continue;
+      }
+    }
+    clusters.push_back({e});
+  }
+  std::vector<LoopRep> reps;
+  for (const auto& cl : clusters) {
+    const Edge* mid = cl[cl.size() / 2];
+    reps.push_back(LoopRep{mid->from, mid->to, &mid->loop, static_cast<int>(cl.size())});
+  }
+  const size_t cap = static_cast<size_t>(std::max(2, cfg.max_loop_anchors));
+  if (reps.size() > cap) {
+    const size_t keep_new = cap / 2, keep_old = cap - keep_new;
+    const size_t n_old = reps.size() - keep_new;
+    std::vector<LoopRep> thinned;
+    for (size_t i = 0; i < keep_old; ++i) {
+      const size_t k = keep_old == 1 ? 0 : (i * (n_old - 1)) / (keep_old - 1);
+      if (thinned.empty() || thinned.back().to != reps[k].to) thinned.push_back(reps[k]);
+    }
+    thinned.insert(thinned.end(), reps.end() - keep_new, reps.end());
+    reps.swap(thinned);
+  }
+  return reps;
+}
+
+bool PoseGraph::Impl::condense(int component, const std::vector<size_t>& extra, double variance_scale,
+                               CondensedGraph* cg, std::vector<size_t>* anchors) const {
+  const std::vector<LoopRep> reps = loopReps(component);
+  std::vector<size_t>& a = *anchors;
+  a = extra;
+  for (const LoopRep& r : reps) {
+    a.push_back(r.from);
+    a.push_back(r.to);
+  }
+  std::sort(a.begin(), a.end());
+  a.erase(std::unique(a.begin(), a.end()), a.end());
+  for (size_t p : a) {
+    AnchorState st;
+    st.p = Eigen::Vector3d(x[p].t[0], x[p].t[1], x[p].t[2]);
+    st.yaw = x[p].yaw;
+    cg->addAnchor(st, kfs[p].pitch, kfs[p].roll, kfs[p].sequence == 0);
+  }
+  auto id = [&](size_t p) { return static_cast<int>(std::lower_bound(a.begin(), a.end(), p) - a.begin()); };
+  for (size_t i = 1; i < a.size(); ++i) {
+    const Keyframe& ka = kfs[a[i - 1]];
+    const Keyframe& kb = kfs[a[i]];
+    if (ka.segment != kb.segment) continue;
+    const SequenceChain& ch = chains.at(ka.segment);
+    CondensedEdge e;
+    e.from = static_cast<int>(i - 1);
+    e.to = static_cast<int>(i);
+    const Eigen::Matrix3d Ra = ka.vio.q.toRotationMatrix();
+    e.t = Ra.transpose() * (kb.vio.t - ka.vio.t);
+    e.yaw = wrapAngle(kb.yaw - ka.yaw);
+    e.covariance = variance_scale * ch.moments.relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
+    if (!cg->addEdge(e)) return false;
+  }
+  const Eigen::Matrix4d L = loopCovariance();
+  for (const LoopRep& r : reps) {
+    CondensedEdge e;
+    e.from = id(r.from);
+    e.to = id(r.to);
+    e.t = r.loop->relative_t;
+    e.yaw = r.loop->relative_yaw;
+    e.covariance = L / r.count;
+    if (!cg->addEdge(e)) return false;
+  }
+  return true;
+}
+
+void PoseGraph::Impl::spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg) {
+  auto stateOf = [&](int i) {
+    KeyframeState s = x[anchors[i]];
+    const AnchorState& a = cg.state(i);
+    for (int k = 0; k < 3; ++k) s.t[k] = a.p[k];
+    s.yaw = a.yaw;
+    return s;
+  };
+  auto rigid = [&](size_t from, size_t to, size_t anchor, const KeyframeState& now) {
+    const Correction c = correctionBetween(x[anchor], now, kfs[anchor]);
+    for (size_t p = from; p < to; ++p) x[p] = applyCorrection(c, x[p], kfs[p]);
+  };
+  for (const auto& kv : chains) {
+    const int seg = kv.first;
+    const SequenceChain& ch = kv.second;
+    if (componentOf(ch.start) != component) continue;
+    const size_t end = ch.start + ch.moments.size();
+    std::vector<int> in;  // anchor indices in this segment
+    for (size_t i = 0; i < anchors.size(); ++i)
+      if (kfs[anchors[i]].segment == seg) in.push_back(static_cast<int>(i));
+    if (in.empty()) continue;
+    std::vector<KeyframeState> now(in.size());
+    std::vector<bool> moved(in.size());
+    for (size_t j = 0; j < in.size(); ++j) {
+      now[j] = stateOf(in[j]);
+      const KeyframeState& old = x[anchors[in[j]]];
+      moved[j] = std::abs(wrapAngle(now[j].yaw - old.yaw)) > kSpreadYaw ||
+                 (Eigen::Vector3d(now[j].t[0] - old.t[0], now[j].t[1] - old.t[1], now[j].t[2] - old.t[2])).norm() > kSpreadTranslation;
+    }
+    if (moved.front()) rigid(ch.start, anchors[in.front()], anchors[in.front()], now.front());
+    if (moved.back()) rigid(anchors[in.back()] + 1, end, anchors[in.back()], now.back());
+    for (size_t j = 0; j + 1 < in.size(); ++j) {
+      const size_t pa = anchors[in[j]], pb = anchors[in[j + 1]];
+      // A chain whose ends (nearly) stayed keeps its keyframes: far from a new loop, the
+      // estimate barely changes, and this keeps a commit from costing O(keyframes).
+      if (pb > pa + 1 && (moved[j] || moved[j + 1])) {
+        // Rigid prediction from a's new state, plus the chain's share of the gap at b.
+        const KeyframeState& na = now[j];
+        const KeyframeState& nb = now[j + 1];
+        const double dyaw = wrapAngle(na.yaw - kfs[pa].yaw);
+        const Eigen::Matrix3d Rd = yawPitchRollToRotation(dyaw, 0, 0);
+        const Eigen::Vector3d Pa(na.t[0], na.t[1], na.t[2]), Pb(nb.t[0], nb.t[1], nb.t[2]);
+        Eigen::Vector4d gap;
+        gap.head<3>() = Rd.transpose() * (Pb - (Pa + Rd * (kfs[pb].vio.t - kfs[pa].vio.t)));
+        gap[3] = wrapAngle(nb.yaw - (kfs[pb].yaw + dyaw));
+        const size_t la = pa - ch.start, lb = pb - ch.start;
+        const Eigen::Matrix4d Cbb = ch.moments.cross(la, lb, lb);
+        const Eigen::Vector4d w = Cbb.ldlt().solve(gap);
+        for (size_t p = pa + 1; p < pb; ++p) {
+          const Eigen::Vector4d corr = ch.moments.cross(la, p - ch.start, lb) * w;
+          const Eigen::Vector3d t = Pa + Rd * (kfs[p].vio.t - kfs[pa].vio.t) + Rd * corr.head<3>();
+          KeyframeState& s = x[p];
+          for (int k = 0; k < 3; ++k) s.t[k] = t[k];
+          s.yaw = wrapAngle(kfs[p].yaw + dyaw + corr[3]);
+        }
+      }
+    }
+    for (size_t j = 0; j < in.size(); ++j) x[anchors[in[j]]] = now[j];
+  }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -603,6 +850,7 @@ Status PoseGraph::addKeyframe(int64_t index, double stamp, int sequence, const E
   m.kfs.push_back(kf);  // (prev is not used below: push_back may move it)
   m.x.push_back(s);
   m.root(kf.segment);
+  m.appendMoments(pos);
   const int n = std::max(0, config_.odometry_neighbours);
   for (int j = n; j >= 1; --j) {
     if (pos < static_cast<size_t>(j)) continue;
@@ -756,6 +1004,96 @@ BatchSolveResult PoseGraph::solveLikeLoopFusion(int max_iterations) const {
 }
 
 size_t PoseGraph::solveCount() const { return impl_->solves; }
+
+bool PoseGraph::relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
+                                   Eigen::Matrix4d* covariance, int* anchors) const {
+  const Impl& m = *impl_;
+  if (!m.fourDof() || match_pos >= m.kfs.size() || query_pos >= m.kfs.size()) return false;
+  const int comp = m.componentOf(query_pos);
+  if (m.componentOf(match_pos) != comp) return false;
+  CondensedGraph cg;
+  std::vector<size_t> a;
+  if (!m.condense(comp, {match_pos, query_pos}, variance_scale, &cg, &a)) return false;
+  if (anchors) *anchors = static_cast<int>(a.size());
+  const int gm = static_cast<int>(std::lower_bound(a.begin(), a.end(), match_pos) - a.begin());
+  const int gq = static_cast<int>(std::lower_bound(a.begin(), a.end(), query_pos) - a.begin());
+  const Impl::Keyframe& km = m.kfs[match_pos];
+  const Eigen::Matrix3d Rm = yawPitchRollToRotation(m.x[match_pos].yaw, km.pitch, km.roll);
+  // The match is the gauge: every other anchor free, sequence 0 too (the prior map's pose is
+  // known, but not relative to this match).
+  for (size_t i = 0; i < a.size(); ++i) cg.setFixed(static_cast<int>(i), false);
+  return cg.marginal(gm, gq, Rm, covariance);
+}
+
+Eigen::Matrix4d PoseGraph::loopCovariance() const { return impl_->loopCovariance(); }
+
+bool PoseGraph::chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* cov) const {
+  const Impl& m = *impl_;
+  if (from > to || to >= m.kfs.size() || m.kfs[from].segment != m.kfs[to].segment) return false;
+  if (from == to) {
+    cov->setZero();
+    return true;
+  }
+  const Impl::SequenceChain& ch = m.chains.at(m.kfs[from].segment);
+  // In from's own frame: the same whether rotated by X's yaw correction or not (VIO, like the moments).
+  *cov = variance_scale * ch.moments.relative(from - ch.start, to - ch.start, m.kfs[from].vio.q.toRotationMatrix());
+  return true;
+}
+
+int PoseGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
+
+bool PoseGraph::estimateAt(size_t position, Pose* pose) const {
+  if (position >= impl_->kfs.size()) return false;
+  *pose = impl_->poseFromState(impl_->x[position], impl_->kfs[position]);
+  return true;
+}
+
+Eigen::Vector4d PoseGraph::innovationVector(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+  const Impl& m = *impl_;
+  const KeyframeState& xm = m.x[mpos];
+  const KeyframeState& xq = m.x[qpos];
+  const Eigen::Matrix3d Rm = m.rotationOf(xm, m.kfs[mpos]);
+  const Eigen::Vector3d d(xq.t[0] - xm.t[0], xq.t[1] - xm.t[1], xq.t[2] - xm.t[2]);
+  Eigen::Vector4d nu;
+  nu.head<3>() = c.relative_t - Rm.transpose() * d;
+  nu[3] = wrapAngle(c.relative_yaw - (xq.yaw - xm.yaw));
+  return nu;
+}
+
+Status PoseGraph::updateEstimate(size_t position, double variance_scale) {
+  Impl& m = *impl_;
+  if (!m.fourDof()) return Status::Error("updateEstimate: 4-DoF only");
+  if (position >= m.kfs.size()) return Status::Error("updateEstimate: unknown position");
+  const int comp = m.componentOf(position);
+  CondensedGraph cg;
+  std::vector<size_t> a;
+  if (!m.condense(comp, {}, variance_scale, &cg, &a))
+    return Status::Error("updateEstimate: a covariance of the condensed graph is unusable");
+  if (a.empty()) return Status::Ok();
+  bool any_fixed = false;
+  for (size_t i = 0; i < a.size(); ++i) any_fixed = any_fixed || m.kfs[a[i]].sequence == 0;
+  if (!any_fixed) cg.setFixed(0, true);  // the oldest loop end holds the gauge (loop_fusion too)
+  bool ok = false;
+  cg.solve(10, 1e-9, &ok);
+  if (!ok) return Status::Error("updateEstimate: the condensed solve failed");
+  m.spread(comp, a, cg);
+  return Status::Ok();
+}
+
+Status PoseGraph::removeLoop(int64_t query_index, int64_t match_index) {
+  Impl& m = *impl_;
+  size_t qpos = 0, mpos = 0;
+  if (!m.find(query_index, &qpos) || !m.find(match_index, &mpos))
+    return Status::Error("removeLoop: unknown keyframe");
+  for (auto it = m.loops.begin(); it != m.loops.end(); ++it) {
+    if (it->from == mpos && it->to == qpos) {
+      m.loops.erase(it);
+      ++m.revision;
+      return Status::Ok();
+    }
+  }
+  return Status::Error("removeLoop: no loop " + describeIndex(query_index) + " -> " + describeIndex(match_index));
+}
 
 }  // namespace core
 }  // namespace rover_loop_fusion

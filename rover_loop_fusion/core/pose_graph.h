@@ -84,6 +84,8 @@ class PoseGraph {
   /// Position (0 = oldest) of the keyframe with this index; false if unknown.
   bool find(int64_t index, size_t* position) const;
   int sequenceAt(size_t position) const;
+  /// The segment of a keyframe (odometry joins only keyframes of one segment).
+  int segmentAt(size_t position) const;
 
   // ---- loops --------------------------------------------------------------------------------
   /// Empty if the candidate can be used as a loop edge (known keyframes, match older than
@@ -101,6 +103,8 @@ class PoseGraph {
 
   // ---- the estimate X -------------------------------------------------------------------------
   bool estimate(int64_t index, Pose* pose) const;
+  /// X of the keyframe at `position`; false if there is none.
+  bool estimateAt(size_t position, Pose* pose) const;
   std::vector<TrajectoryPoint> trajectory() const;
   /// |t_meas - t_X|: where the candidate puts the query in the match's frame vs where X has it [m].
   double innovation(const LoopCandidate& c, size_t query_pos, size_t match_pos) const;
@@ -129,6 +133,32 @@ class PoseGraph {
   BatchSolveResult solveLikeLoopFusion(int max_iterations = 5) const;
   /// Ceres solves run so far (diagnostics for tests and benchmarks).
   size_t solveCount() const;
+
+  // ---- uncertainty (decision chi2; 4-DoF; core/drift.h, core/condensed.h) --------------------
+  // Odometry steps carry the drift model's covariance (config drift_*), accepted loops
+  // loop_sigma / loop_sigma_yaw. Everything below works on the condensed graph: the loop ends
+  // (merged and capped by max_loop_anchors) and the keyframes asked about, joined by chains
+  // whose covariance comes from prefix moments: O(anchors), whatever the run's length.
+
+  /// Covariance (x, y, z, yaw; translation in the match's frame) of the query's pose relative
+  /// to the match's through the graph, drift variances times `variance_scale`; the number of
+  /// anchors used in *anchors. False if the two are not tied together (or 6-DoF).
+  bool relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
+                          Eigen::Matrix4d* covariance, int* anchors = nullptr) const;
+  /// Covariance of the pose of keyframe `to` relative to `from` (from < to, one segment) along
+  /// the odometry alone (no loops), translation in `from`'s frame; false otherwise.
+  bool chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* covariance) const;
+  /// Covariance of a loop's relative pose (loop_sigma, loop_sigma_yaw).
+  Eigen::Matrix4d loopCovariance() const;
+  /// The candidate's relative pose minus what X predicts: translation in the match's frame, yaw.
+  Eigen::Vector4d innovationVector(const LoopCandidate& c, size_t query_pos, size_t match_pos) const;
+  /// X := the weighted least-squares estimate of the component of `position` with its accepted
+  /// loops (Gauss-Newton on the condensed graph; the chains between anchors follow as the
+  /// linear solve places them). Error (X unchanged) if the solve failed.
+  Status updateEstimate(size_t position, double variance_scale);
+  /// Removes an accepted loop (a revocation); X is not updated (updateEstimate). The sequences
+  /// stay connected.
+  Status removeLoop(int64_t query_index, int64_t match_index);
 
  private:
   struct Impl;

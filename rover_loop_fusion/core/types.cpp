@@ -14,6 +14,11 @@ const char* toString(Reason reason) {
     case Reason::kInvalidInput: return "invalid_input";
     case Reason::kTimeBudgetExceeded: return "time_budget_exceeded";
     case Reason::kInnovationAboveBound: return "innovation_above_bound";
+    case Reason::kInconsistentWithDrift: return "inconsistent_with_drift";
+    case Reason::kLookalikeCloser: return "lookalike_closer";
+    case Reason::kDeferred: return "deferred";
+    case Reason::kUnconfirmed: return "unconfirmed";
+    case Reason::kRevoked: return "revoked";
   }
   return "invalid_input";
 }
@@ -22,6 +27,15 @@ const char* toString(Mode mode) { return mode == Mode::kFourDof ? "4dof" : "6dof
 
 const char* toString(Alignment alignment) {
   return alignment == Alignment::kSE3 ? "se3" : "sim3";
+}
+
+const char* toString(Decision decision) { return decision == Decision::kChi2 ? "chi2" : "metric"; }
+
+bool parseDecision(const std::string& s, Decision* decision) {
+  if (s == "chi2") *decision = Decision::kChi2;
+  else if (s == "metric") *decision = Decision::kMetric;
+  else return false;
+  return true;
 }
 
 bool parseMode(const std::string& s, Mode* mode) {
@@ -56,6 +70,17 @@ Verdict Verdict::Accept(const LoopCandidate& c, std::string detail, Reason reaso
   v.match_index = c.match_index;
   v.accepted = true;
   v.reason = reason;
+  v.detail = std::move(detail);
+  return v;
+}
+
+Verdict Verdict::Defer(const LoopCandidate& c, std::string detail) {
+  Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = false;
+  v.deferred = true;
+  v.reason = Reason::kDeferred;
   v.detail = std::move(detail);
   return v;
 }

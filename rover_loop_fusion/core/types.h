@@ -23,6 +23,14 @@ enum class Mode { kFourDof, kSixDof };
 /// kSE3 when scale is observable (VIO, stereo); kSim3 for monocular VO.
 enum class Alignment { kSE3, kSim3 };
 
+/// How a candidate is decided (docs/method.md).
+/// kMetric: the paper's deformation score against a threshold in metres, behind an innovation
+///   gate in metres that grows with the path (rover_paper.yaml: threshold only).
+/// kChi2: in units of drift: the innovation's Mahalanobis distance under the uncertainty of the
+///   relative pose through the graph (drift model + accepted loops) against a chi-square
+///   quantile, and the look-alike test (no look-alike place explains the candidate better).
+enum class Decision { kMetric, kChi2 };
+
 /// Why a verdict came out the way it did. Exactly one per verdict.
 enum class Reason {
   kAccepted,             ///< solve converged and score <= threshold
@@ -31,6 +39,11 @@ enum class Reason {
   kNoTrajectoryPrior,    ///< query and match are in sequences nothing connects yet
   kInvalidInput,         ///< the candidate or the graph state is not usable
   kTimeBudgetExceeded,   ///< the solve ran past config.time_budget_ms
+  kInconsistentWithDrift, ///< chi2: the innovation's Mahalanobis distance exceeds the gate
+  kLookalikeCloser,      ///< chi2: a look-alike place at lookalike_distance explains it better
+  kDeferred,             ///< held: neither accepted nor rejected yet; a LoopDecision follows
+  kUnconfirmed,          ///< a held candidate that was not confirmed (in time, or a rival won)
+  kRevoked,              ///< an accepted loop that a larger consistent group contradicted
   kInnovationAboveBound, ///< the candidate disagrees with the estimate by more than the drift
                          ///< over the path between the two keyframes can explain (no solve)
 };
@@ -39,6 +52,8 @@ enum class Reason {
 const char* toString(Reason reason);
 const char* toString(Mode mode);
 const char* toString(Alignment alignment);
+const char* toString(Decision decision);
+bool parseDecision(const std::string& s, Decision* decision);
 bool parseMode(const std::string& s, Mode* mode);
 bool parseAlignment(const std::string& s, Alignment* alignment);
 
@@ -70,6 +85,9 @@ struct Verdict {
   int64_t query_index = -1;
   int64_t match_index = -1;
   bool accepted = false;
+  /// The candidate is held (reason kDeferred, accepted false): the host must not use the loop
+  /// now; Verifier::takeDecisions() says later whether it was released or dropped.
+  bool deferred = false;
   Reason reason = Reason::kInvalidInput;
   double score = std::numeric_limits<double>::quiet_NaN();  ///< RMSE of aligned positions [m]
   double threshold = std::numeric_limits<double>::quiet_NaN();  ///< effective, see VerifierConfig
@@ -92,6 +110,8 @@ struct Verdict {
                         Reason reason = Reason::kAccepted);
   /// A verdict that keeps the candidate's loop out, with why (kAccepted is taken as kInvalidInput).
   static Verdict Reject(Reason reason, const LoopCandidate& candidate, std::string detail);
+  /// A verdict that holds the candidate (reason kDeferred, deferred true, accepted false).
+  static Verdict Defer(const LoopCandidate& candidate, std::string detail);
 };
 
 /// One keyframe of a trajectory, as reported by Verifier::trajectory(), PoseGraph::trajectory()
@@ -139,6 +159,9 @@ struct Status {
 /// The verifier's parameters. Every field is a row of the parameter table (core/parameters.h:
 /// its YAML name, unit, range and doc); adding a field means adding its row there.
 struct VerifierConfig {
+  /// How candidates are decided: kMetric (threshold and innovation gate in metres, below) or
+  /// kChi2 (in units of drift: the fields from drift_xy on). See Decision.
+  Decision decision = Decision::kMetric;
   Mode mode = Mode::kFourDof;
   Alignment alignment = Alignment::kSE3;
   /// Accept iff score <= threshold + threshold_per_metre * path_length [m], where
@@ -202,6 +225,51 @@ struct VerifierConfig {
   double max_keyframe_jump = 10.0;
   double max_stamp_jump = 3600.0;
   int jump_confirmations = 3;
+
+  // ---- decision: chi2 (docs/method.md) -------------------------------------------------
+  /// Odometry drift model (core/drift.h): standard deviation per square root of a metre
+  /// travelled, horizontal and vertical translation [m/sqrt(m)] and yaw [rad/sqrt(m)]; every
+  /// keyframe step counts as at least drift_min_step [m] (rotations in place drift too).
+  double drift_xy = 0.05;
+  double drift_z = 0.025;
+  double drift_yaw = 0.2 * M_PI / 180.0;
+  double drift_min_step = 0.05;
+  /// Standard deviation of a loop's relative pose (what PnP on the place returns) [m], [rad].
+  double loop_sigma = 0.05;
+  double loop_sigma_yaw = 1.0 * M_PI / 180.0;
+  /// The gate: reject iff the innovation's Mahalanobis distance d2 (4 dof) exceeds the
+  /// chi-square quantile of this probability.
+  double gate_probability = 0.999;
+  /// The look-alike test: the environment repeats itself lookalike_distance [m] away
+  /// horizontally (aisles, doors) and lookalike_distance_vertical [m] away vertically (floors);
+  /// 0 = no such look-alikes. Reject a candidate when "a look-alike that far away" explains its
+  /// innovation nearly as well as "this is the place": d2(nu - o) - d2(nu) < lookalike_margin
+  /// for some such offset o.
+  double lookalike_distance = 1.5;
+  double lookalike_distance_vertical = 1.5;
+  double lookalike_margin = 4.0;
+  /// Accepted loops at most in the condensed graph (O(anchors) per verification): loops of one
+  /// revisit are merged, then older ones thinned.
+  int max_loop_anchors = 64;
+  /// Holding and confirming (both decisions; Verifier::takeDecisions): a held candidate is
+  /// released once confirm_count held candidates of the same stretch (queries within
+  /// confirm_window keyframes, same segments) agree with each other (every pair: the cycle
+  /// loop - odometry - loop - odometry closes within chi-square gate_probability) and no rival
+  /// group of at least half its size contradicts them; dropped if not confirmed within
+  /// confirm_window keyframes after it arrived.
+  int confirm_count = 3;
+  int confirm_window = 40;
+  /// chi2: hold a candidate that passes the tests while the relative position's largest
+  /// standard deviation exceeds hold_sigma [m] (the prior alone is too weak to trust a single
+  /// candidate); 0 = never hold.
+  double hold_sigma = 0.0;
+  /// Candidates between sequences nothing connects yet (relocalisation, map merging): hold and
+  /// release them once confirmed (takes precedence over accept_without_prior). Set by the host.
+  bool confirm_without_prior = false;
+  /// Scale the drift model's variances to the innovations of the loops accepted so far (a
+  /// robust maximum-likelihood fit, clamped to [1/100, 100]): the user need not know the VIO's
+  /// drift rate exactly.
+  bool calibrate_drift = false;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.

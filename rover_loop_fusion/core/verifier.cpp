@@ -1,8 +1,14 @@
 #include "rover_loop_fusion/core/verifier.h"
 
 #include "rover_loop_fusion/core/decision.h"
+#include "rover_loop_fusion/core/geometry.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Geometry>
 
 #include <chrono>
+#include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace rover_loop_fusion {
@@ -42,7 +48,9 @@ Verifier::~Verifier() = default;
 Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                              const Eigen::Quaterniond& q) {
   std::lock_guard<std::mutex> lock(mutex_);
-  return graph_.addKeyframe(index, stamp, sequence, t, q);
+  const Status s = graph_.addKeyframe(index, stamp, sequence, t, q);
+  if (!groups_.empty()) settle();
+  return s;
 }
 
 Verdict Verifier::verify(const LoopCandidate& c) {
@@ -66,6 +74,11 @@ Verdict Verifier::verify(const LoopCandidate& c) {
            "no trajectory prior; ";
     else
       s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; ";
+    if (config_.confirm_without_prior) {
+      s << "held until " << config_.confirm_count << " candidates between them agree (confirm_without_prior)";
+      hold(c, qpos, mpos, true);
+      return withNumbers(Verdict::Defer(c, s.str()), measured, t0);
+    }
     s << (config_.accept_without_prior ? "accepted by policy (accept_without_prior)"
                                        : "rejected by policy (accept_without_prior=false)");
     if (config_.accept_without_prior)
@@ -77,6 +90,37 @@ Verdict Verifier::verify(const LoopCandidate& c) {
                   "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
 
   measured.innovation = graph_.innovation(c, qpos, mpos);
+  if (usesChi2()) {
+    // (No path length: its Dijkstra over every loop end would be the one cost that grows with
+    // the run; the chi2 decision does not use it.)
+    Eigen::Matrix4d C;
+    int anchors = 0;
+    if (!graph_.relativeCovariance(mpos, qpos, drift_scale_, &C, &anchors))
+      return reject(Reason::kInvalidInput, "no covariance of the relative pose (the condensed graph is singular)");
+    const Eigen::Vector4d nu = graph_.innovationVector(c, qpos, mpos);
+    Chi2Numbers n;
+    const Check test = chi2Test(config_, nu, C + graph_.loopCovariance(), &n);
+    measured.score = n.d2;
+    measured.threshold = n.gate;
+    measured.window_size = anchors;
+    measured.converged = true;
+    if (!test.passed) return reject(test.reason, test.detail);
+    if (config_.hold_sigma > 0 && n.sigma > config_.hold_sigma) {
+      std::ostringstream s;
+      s.precision(3);
+      s << std::fixed << test.detail << "; held: the prior alone is too weak (std " << n.sigma << " m > hold_sigma "
+        << config_.hold_sigma << " m) until " << config_.confirm_count << " candidates of this revisit agree";
+      hold(c, qpos, mpos, false);
+      return withNumbers(Verdict::Defer(c, s.str()), measured, t0);
+    }
+    pending_ = Pending();
+    pending_.valid = true;
+    pending_.candidate = c;
+    pending_.revision = graph_.revision();
+    pending_.innovation = nu;
+    pending_.chain_covariance = C / drift_scale_;
+    return withNumbers(Verdict::Accept(c, test.detail), measured, t0);
+  }
   measured.path_length = graph_.pathLength(mpos, qpos);
   measured.threshold = scoreThreshold(config_, measured.path_length);
   const Check gate = innovationGate(config_, measured.innovation, measured.path_length);
@@ -105,6 +149,10 @@ Verdict Verifier::verify(const LoopCandidate& c) {
 
 Status Verifier::commit(const LoopCandidate& c) {
   std::lock_guard<std::mutex> lock(mutex_);
+  return commitLocked(c, true);
+}
+
+Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
   const Pending& p = pending_;
   const bool reuse = p.valid && p.revision == graph_.revision() &&
                      p.candidate.query_index == c.query_index &&
@@ -115,19 +163,265 @@ Status Verifier::commit(const LoopCandidate& c) {
   const Status added = graph_.addLoop(c);
   if (!added) return Status::Error("commit refused: " + added.message);
   pending_.valid = false;
+  size_t qpos = 0, mpos = 0;
+  graph_.find(c.query_index, &qpos);
+  graph_.find(c.match_index, &mpos);
+  if (usesChi2()) {
+    if (reuse) {
+      calibration_.push_back({p.innovation, p.chain_covariance});
+      if (config_.calibrate_drift) recalibrate();
+    }
+    if (!update_estimate) return Status::Ok();
+    const Status updated = graph_.updateEstimate(qpos, drift_scale_);
+    if (!updated) return Status::Warning("loop committed but the update of the estimate failed (" + updated.message + ")");
+    return Status::Ok();
+  }
   if (reuse) {
     graph_.adopt(p.solution);
     return Status::Ok();
   }
-  size_t qpos = 0, mpos = 0;
-  graph_.find(c.query_index, &qpos);
-  graph_.find(c.match_index, &mpos);
   if (graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) return Status::Ok();  // both fixed
   const TrialSolution s = graph_.solveWindow(mpos, qpos, nullptr, false, config_.max_iterations, 0.0);
   if (!s.summary.finite)  // the loop is in the graph (the host uses it); X keeps its old values
     return Status::Warning("loop committed but the update of the estimate failed (" + s.summary.message + ")");
   graph_.adopt(s);
   return Status::Ok();
+}
+
+
+// ---- held candidates ------------------------------------------------------------------------
+
+const char* toString(LoopDecision::Kind kind) {
+  switch (kind) {
+    case LoopDecision::Kind::kRelease: return "release";
+    case LoopDecision::Kind::kDrop: return "drop";
+    case LoopDecision::Kind::kRevoke: return "revoke";
+  }
+  return "drop";
+}
+
+std::vector<LoopDecision> Verifier::takeDecisions() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<LoopDecision> out;
+  out.swap(decisions_);
+  return out;
+}
+
+size_t Verifier::heldCount() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  size_t n = 0;
+  for (const auto& g : groups_) n += g.size();
+  return n;
+}
+
+namespace {
+
+/// 4-DoF perturbation of a relative pose (translation in its `from` frame, yaw about z).
+Eigen::Isometry3d perturbed(const Eigen::Isometry3d& T, const Eigen::Vector4d& d) {
+  Eigen::Isometry3d out = T;
+  out.translation() += d.head<3>();
+  out.linear() = Eigen::AngleAxisd(d[3], Eigen::Vector3d::UnitZ()).toRotationMatrix() * T.linear();
+  return out;
+}
+
+Eigen::Vector4d cycleResidual(const Eigen::Isometry3d& C) {
+  Eigen::Vector4d r;
+  r.head<3>() = C.translation();
+  r[3] = rotationToYawPitchRoll(C.linear())[0];
+  return r;
+}
+
+}  // namespace
+
+Eigen::Isometry3d Verifier::estimatePose(size_t pos) const {
+  Pose p;
+  graph_.estimateAt(pos, &p);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = p.q.toRotationMatrix();
+  T.translation() = p.t;
+  return T;
+}
+
+bool Verifier::consistent(const Held& a, const Held& b) const {
+  // The cycle q_a -> m_a -> m_b -> q_b -> q_a through the two loops and the odometry between
+  // the matches and between the queries must close: C = Za^-1 (Tma^-1 Tmb) Zb (Tqb^-1 Tqa) = I.
+  // Each factor is a 4-DoF relative pose B with its covariance (from the older keyframe to the
+  // newer one, inverted where the cycle runs the other way); the covariance of C's residual
+  // comes from numeric Jacobians.
+  struct Factor {
+    Eigen::Isometry3d base;
+    bool inverted;
+    Eigen::Matrix4d cov;
+  };
+  auto loopPose = [](const LoopCandidate& c) {
+    Eigen::Isometry3d Z = Eigen::Isometry3d::Identity();
+    Z.linear() = c.relative_q.normalized().toRotationMatrix();
+    Z.translation() = c.relative_t;
+    return Z;
+  };
+  auto odometry = [&](size_t from, size_t to, Factor* f) {  // the factor T_from^-1 T_to
+    const size_t lo = std::min(from, to), hi = std::max(from, to);
+    f->base = estimatePose(lo).inverse() * estimatePose(hi);
+    f->inverted = from > to;
+    return graph_.chainCovariance(lo, hi, drift_scale_, &f->cov);
+  };
+  const Eigen::Matrix4d L = graph_.loopCovariance();
+  Factor f[4];
+  f[0] = Factor{loopPose(a.candidate), true, L};
+  f[2] = Factor{loopPose(b.candidate), false, L};
+  if (!odometry(a.match_pos, b.match_pos, &f[1]) || !odometry(b.query_pos, a.query_pos, &f[3])) return false;
+  auto value = [](const Factor& x, const Eigen::Vector4d& d) {
+    const Eigen::Isometry3d B = perturbed(x.base, d);
+    return x.inverted ? Eigen::Isometry3d(B.inverse()) : B;
+  };
+  auto residual = [&](int k, const Eigen::Vector4d& d) {
+    Eigen::Isometry3d C = Eigen::Isometry3d::Identity();
+    for (int i = 0; i < 4; ++i) C = C * value(f[i], i == k ? d : Eigen::Vector4d::Zero());
+    return cycleResidual(C);
+  };
+  const Eigen::Vector4d r = residual(-1, Eigen::Vector4d::Zero());
+  Eigen::Matrix4d S = Eigen::Matrix4d::Zero();
+  const double h = 1e-6;
+  for (int k = 0; k < 4; ++k) {
+    Eigen::Matrix4d J;
+    for (int d = 0; d < 4; ++d) J.col(d) = (residual(k, h * Eigen::Vector4d::Unit(d)) - r) / h;
+    S += J * f[k].cov * J.transpose();
+  }
+  return mahalanobis(r, S) <= chiSquareQuantile(config_.gate_probability, 4);
+}
+
+void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, bool no_prior) {
+  Held h;
+  h.candidate = c;
+  h.query_pos = qpos;
+  h.match_pos = mpos;
+  h.arrived = graph_.keyframeCount();
+  h.no_prior = no_prior;
+  const size_t window = static_cast<size_t>(config_.confirm_window);
+  auto near = [window](size_t x, size_t y) { return (x > y ? x - y : y - x) <= window; };
+  bool joined = false;
+  for (auto& g : groups_) {
+    if (g.front().no_prior != no_prior || graph_.segmentAt(g.front().query_pos) != graph_.segmentAt(qpos) ||
+        graph_.segmentAt(g.front().match_pos) != graph_.segmentAt(mpos))
+      continue;
+    const size_t k = static_cast<size_t>(config_.confirm_count);
+    bool ok = true;
+    for (size_t i = g.size() > k ? g.size() - k : 0; ok && i < g.size(); ++i)
+      ok = near(g[i].query_pos, qpos) && consistent(g[i], h);
+    if (ok) {
+      g.push_back(h);
+      joined = true;
+      break;
+    }
+  }
+  if (!joined) groups_.push_back({h});
+  settle();
+}
+
+void Verifier::settle() {
+  const size_t k = static_cast<size_t>(config_.confirm_count);
+  const size_t window = static_cast<size_t>(config_.confirm_window);
+  const size_t now = graph_.keyframeCount();
+  auto drop = [&](const std::vector<Held>& g, const std::string& why) {
+    for (const Held& h : g) {
+      LoopDecision d;
+      d.kind = LoopDecision::Kind::kDrop;
+      d.candidate = h.candidate;
+      d.verdict = Verdict::Reject(Reason::kUnconfirmed, h.candidate, why);
+      decisions_.push_back(d);
+    }
+  };
+  for (size_t i = 0; i < groups_.size();) {
+    std::vector<Held>& g = groups_[i];
+    if (g.size() >= k) {
+      // Rivals: other held groups of the same query stretch that did not join this one.
+      bool blocked = false;
+      for (size_t j = 0; j < groups_.size(); ++j) {
+        if (j == i) continue;
+        const Held& other = groups_[j].back();
+        const size_t dq = other.query_pos > g.back().query_pos ? other.query_pos - g.back().query_pos
+                                                               : g.back().query_pos - other.query_pos;
+        if (dq <= window && 2 * groups_[j].size() >= g.size()) blocked = true;
+      }
+      if (!blocked) {
+        std::vector<Held> released;
+        released.swap(g);
+        groups_.erase(groups_.begin() + i);
+        release(released);
+        // Rivals too small to block are contradicted by the released group: dropped.
+        for (size_t j = 0; j < groups_.size();) {
+          const Held& other = groups_[j].back();
+          const size_t dq = other.query_pos > released.back().query_pos ? other.query_pos - released.back().query_pos
+                                                                        : released.back().query_pos - other.query_pos;
+          if (dq <= window) {
+            drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
+            groups_.erase(groups_.begin() + j);
+          } else {
+            ++j;
+          }
+        }
+        i = 0;  // the graph changed: look at the rest again
+        continue;
+      }
+    }
+    if (now > g.front().arrived + window) {
+      std::ostringstream s;
+      s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
+      drop(g, s.str());
+      groups_.erase(groups_.begin() + i);
+      continue;
+    }
+    ++i;
+  }
+}
+
+void Verifier::release(const std::vector<Held>& group) {
+  std::ostringstream why;
+  why << "confirmed: " << group.size() << " held candidates agree with each other (loops "
+      << group.front().candidate.query_index << "->" << group.front().candidate.match_index << " .. "
+      << group.back().candidate.query_index << "->" << group.back().candidate.match_index << ")";
+  std::vector<const Held*> committed;
+  for (const Held& h : group) {
+    // A candidate with a prior must still pass the test against the graph as it is now.
+    if (!h.no_prior && usesChi2() && graph_.connected(h.query_pos, h.match_pos)) {
+      Eigen::Matrix4d C;
+      Chi2Numbers n;
+      if (!graph_.relativeCovariance(h.match_pos, h.query_pos, drift_scale_, &C) ||
+          !chi2Test(config_, graph_.innovationVector(h.candidate, h.query_pos, h.match_pos),
+                    C + graph_.loopCovariance(), &n).passed) {
+        LoopDecision d;
+        d.kind = LoopDecision::Kind::kDrop;
+        d.candidate = h.candidate;
+        d.verdict = Verdict::Reject(Reason::kUnconfirmed, h.candidate,
+                                    "confirmed with its revisit but no longer consistent with the graph");
+        decisions_.push_back(d);
+        continue;
+      }
+    }
+    pending_.valid = false;
+    const Status s = commitLocked(h.candidate, false);
+    LoopDecision d;
+    d.candidate = h.candidate;
+    if (!s.ok) {
+      d.kind = LoopDecision::Kind::kDrop;
+      d.verdict = Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed but not committed: " + s.message);
+    } else {
+      d.kind = LoopDecision::Kind::kRelease;
+      d.verdict = Verdict::Accept(h.candidate, why.str());
+      committed.push_back(&h);
+    }
+    decisions_.push_back(d);
+  }
+  if (committed.empty()) return;
+  // One update of the estimate for the whole group.
+  if (usesChi2()) {
+    graph_.updateEstimate(committed.back()->query_pos, drift_scale_);
+  } else {
+    const Held& last = *committed.back();
+    const TrialSolution sol = graph_.solveWindow(committed.front()->match_pos, last.query_pos, nullptr, false,
+                                                 config_.max_iterations, 0.0);
+    if (sol.summary.finite) graph_.adopt(sol);
+  }
 }
 
 size_t Verifier::keyframeCount() const {
@@ -158,6 +452,45 @@ bool Verifier::estimate(int64_t index, Pose* pose) const {
 std::vector<TrajectoryPoint> Verifier::trajectory() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return graph_.trajectory();
+}
+
+double Verifier::driftScale() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return drift_scale_;
+}
+
+bool Verifier::usesChi2() const {
+  return config_.decision == Decision::kChi2 && config_.mode == Mode::kFourDof;
+}
+
+void Verifier::recalibrate() {
+  // Robust maximum likelihood of one variance scale s of the drift model: each accepted loop's
+  // innovation nu ~ N(0, s C + L) (C: its chain covariance at scale 1, L: the loop's), Huber
+  // on sqrt(d2) (an accepted look-alike cannot drag s far), over a log grid of s.
+  const size_t kMinLoops = 5, kWindow = 200;
+  if (calibration_.size() < kMinLoops) return;
+  const size_t first = calibration_.size() > kWindow ? calibration_.size() - kWindow : 0;
+  const Eigen::Matrix4d L = graph_.loopCovariance();
+  double best = drift_scale_, best_nll = std::numeric_limits<double>::infinity();
+  for (int k = 0; k <= 80; ++k) {
+    const double s = std::exp(std::log(0.01) + k * (std::log(100.0) - std::log(0.01)) / 80.0);
+    double nll = 0.0;
+    for (size_t i = first; i < calibration_.size(); ++i) {
+      const Eigen::Matrix4d S = s * calibration_[i].chain_covariance + L;
+      const Eigen::LLT<Eigen::Matrix4d> llt(S);
+      if (llt.info() != Eigen::Success) continue;
+      const double d2 = calibration_[i].innovation.dot(llt.solve(calibration_[i].innovation));
+      const double r = std::sqrt(std::max(0.0, d2));
+      const double rho = r < 3.0 ? d2 : 6.0 * r - 9.0;
+      const Eigen::Matrix4d Lc = llt.matrixL();
+      nll += 0.5 * rho + Lc.diagonal().array().log().sum();
+    }
+    if (nll < best_nll) {
+      best_nll = nll;
+      best = s;
+    }
+  }
+  drift_scale_ = best;
 }
 
 BatchSolveResult Verifier::solveLikeLoopFusion(int max_iterations) const {

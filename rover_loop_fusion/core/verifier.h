@@ -9,6 +9,27 @@
 // Umeyama alignment (the tests themselves: core/decision.h). verify() never changes the graph;
 // commit() adds the loop and keeps the X* of the verify() that accepted it (no second solve).
 //
+// decision chi2 (core/decision.h) decides in units of drift instead: the innovation against the
+// covariance of the relative pose through the condensed graph, no trial solve.
+//
+// Held candidates and later decisions (the protocol a host follows):
+//   verdict = verify(c)
+//     accepted  -> use the loop, then commit(c)                    (as always)
+//     deferred  -> do not use the loop yet (reason kDeferred)       (confirm_without_prior,
+//                                                                    hold_sigma)
+//     otherwise -> rejected
+//   after every addKeyframe() and verify(): for (d : takeDecisions())
+//     kRelease  -> the held candidate d.candidate is accepted now and ALREADY COMMITTED by the
+//                  verifier: apply it to its query keyframe (loop_fusion: has_loop, loop_index,
+//                  loop_info; optimize_buf), do not call commit()
+//     kDrop     -> the held candidate is rejected for good (reason kUnconfirmed)
+//     kRevoke   -> a loop accepted earlier (committed or released) is removed from the
+//                  verifier's graph: remove it from the host's (loop_fusion: clear has_loop and
+//                  loop_index of the query keyframe and queue an optimisation, which restarts
+//                  from the VIO poses with the loops that remain)
+// Decisions come in the order they were made; each held candidate gets exactly one kRelease or
+// kDrop; a revoked loop is never released or accepted again.
+//
 // Every public method is safe to call from any thread (one internal mutex), never throws for
 // bad input and never leaves the graph half-changed: bad input comes back as a Status or as a
 // Verdict with reason kInvalidInput.
@@ -17,11 +38,26 @@
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/types.h"
 
+#include <Eigen/Geometry>
+
 #include <mutex>
 #include <vector>
 
 namespace rover_loop_fusion {
 namespace core {
+
+/// A decision about a candidate made after verify() returned for it.
+struct LoopDecision {
+  enum class Kind {
+    kRelease,  ///< a held candidate accepted (and committed by the verifier)
+    kDrop,     ///< a held candidate rejected (reason kUnconfirmed)
+    kRevoke,   ///< an accepted loop removed again (reason kRevoked)
+  };
+  Kind kind = Kind::kDrop;
+  LoopCandidate candidate;  ///< as handed to verify()
+  Verdict verdict;          ///< the final verdict: accepted for kRelease, rejected otherwise
+};
+const char* toString(LoopDecision::Kind kind);  // "release", "drop", "revoke"
 
 class Verifier {
  public:
@@ -40,8 +76,15 @@ class Verifier {
   Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                      const Eigen::Quaterniond& q);
 
-  /// Scores a candidate against the trajectory prior. Does not change the graph.
+  /// Scores a candidate against the trajectory prior. Does not change the graph; a deferred
+  /// verdict holds the candidate (see the protocol above).
   Verdict verify(const LoopCandidate& candidate);
+
+  /// The decisions made since the last call, oldest first (see the protocol above). Cheap when
+  /// there are none.
+  std::vector<LoopDecision> takeDecisions();
+  /// Candidates held now (deferred, neither released nor dropped yet).
+  size_t heldCount() const;
 
   /// Adds a loop edge that the host is going to use and updates X. If the last verify()
   /// accepted this very candidate, its X* is kept (no second solve); otherwise (stored loops
@@ -67,19 +110,49 @@ class Verifier {
   /// For benchmarks and evaluation; does not change the verifier.
   BatchSolveResult solveLikeLoopFusion(int max_iterations = 5) const;
 
+  /// decision chi2: the variance scale of the drift model (1 unless calibrate_drift fitted it).
+  double driftScale() const;
+
  private:
+  /// A held candidate.
+  struct Held {
+    LoopCandidate candidate;
+    size_t query_pos = 0, match_pos = 0;
+    size_t arrived = 0;    ///< keyframeCount() when it was held
+    bool no_prior = false; ///< held for confirm_without_prior (else for hold_sigma)
+  };
+  bool usesChi2() const;
+  void recalibrate();
+  Status commitLocked(const LoopCandidate& c, bool update_estimate);
+  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, bool no_prior);
+  /// Releases groups that are confirmed, drops those that expired (decisions_).
+  void settle();
+  void release(const std::vector<Held>& group);
+  bool consistent(const Held& a, const Held& b) const;
+  Eigen::Isometry3d estimatePose(size_t position) const;
   /// The X* of the last verify() that accepted, for commit() to keep.
   struct Pending {
     bool valid = false;
     LoopCandidate candidate;
     uint64_t revision = 0;  ///< the graph's revision it was solved on
     TrialSolution solution;
+    Eigen::Vector4d innovation = Eigen::Vector4d::Zero();  ///< chi2: for the calibration
+    Eigen::Matrix4d chain_covariance = Eigen::Matrix4d::Zero();  ///< chi2, at variance scale 1
+  };
+  /// chi2 + calibrate_drift: what each accepted loop said about the drift.
+  struct CalibrationSample {
+    Eigen::Vector4d innovation;
+    Eigen::Matrix4d chain_covariance;
   };
   std::string config_error_;  // before config_: the constructor validates first
   VerifierConfig config_;
   mutable std::mutex mutex_;
   PoseGraph graph_;
   Pending pending_;
+  double drift_scale_ = 1.0;
+  std::vector<CalibrationSample> calibration_;
+  std::vector<std::vector<Held>> groups_;  ///< held candidates, by revisit
+  std::vector<LoopDecision> decisions_;    ///< not yet taken
 };
 
 }  // namespace core

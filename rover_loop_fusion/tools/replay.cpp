@@ -166,6 +166,34 @@ int main(int argc, char** argv) {
   double verify_ms = 0.0;
   std::vector<double> stamps;
   std::vector<core::Pose> odometry;
+  // One row per candidate, written at the end: a held candidate's row becomes its final
+  // decision (released, dropped), an accepted loop's row "revoked" if a revocation comes.
+  struct Row {
+    core::Verdict verdict;
+    int label = -1;
+    double query_stamp = 0.0, match_stamp = 0.0;
+    int inliers = -1;
+  };
+  std::vector<Row> rows;
+  std::map<std::pair<int64_t, int64_t>, size_t> open_rows;  // deferred or accepted, by (query, match)
+  auto key = [](const core::LoopCandidate& c) { return std::make_pair(c.query_index, c.match_index); };
+  auto takeDecisions = [&]() {
+    for (const core::LoopDecision& d : verifier.takeDecisions()) {
+      auto it = open_rows.find(key(d.candidate));
+      if (it == open_rows.end()) continue;
+      core::Verdict& v = rows[it->second].verdict;
+      const int label = rows[it->second].label;
+      v.accepted = d.verdict.accepted;
+      v.deferred = false;
+      v.reason = d.verdict.reason;
+      v.detail = std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + v.detail + ")";
+      if (!v.accepted) open_rows.erase(it);
+      if (!quiet)
+        std::printf("%7lld -> %7lld  label %2d  %-8s %s\n", static_cast<long long>(d.candidate.query_index),
+                    static_cast<long long>(d.candidate.match_index), label, core::toString(d.kind),
+                    d.verdict.detail.c_str());
+    }
+  };
   auto handle = [&](const sim::ScenarioCandidate& sc) {
     const core::LoopCandidate& c = sc.candidate;
     const core::Verdict v = verifier.verify(c);
@@ -174,15 +202,19 @@ int main(int argc, char** argv) {
     const bool commit = protocol == "sequential" ? v.accepted : protocol == "oracle" ? sc.label == 1 : false;
     if (commit) verifier.commit(c);
     accept_all.addLoop(c);
-    if (sc.label == 1) (v.accepted ? tp : fn)++;
-    if (sc.label == 0) (v.accepted ? fp : tn)++;
-    const double qs = stamp_of.count(c.query_index) ? stamp_of[c.query_index] : 0.0;
-    const double ms = stamp_of.count(c.match_index) ? stamp_of[c.match_index] : 0.0;
-    std::fprintf(csv, "%s\n", core::verdictCsvRow(v, qs, ms, c.inliers, "rover_replay").c_str());
+    Row row;
+    row.verdict = v;
+    row.label = sc.label;
+    row.query_stamp = stamp_of.count(c.query_index) ? stamp_of[c.query_index] : 0.0;
+    row.match_stamp = stamp_of.count(c.match_index) ? stamp_of[c.match_index] : 0.0;
+    row.inliers = c.inliers;
+    rows.push_back(row);
+    if (v.accepted || v.deferred) open_rows[key(c)] = rows.size() - 1;
     if (!quiet)
       std::printf("%7lld -> %7lld  label %2d  %-8s %-22s score %8.3f  %6.2f ms\n",
                   static_cast<long long>(c.query_index), static_cast<long long>(c.match_index), sc.label,
-                  v.accepted ? "ACCEPT" : "REJECT", core::toString(v.reason), v.score, v.elapsed_ms);
+                  v.accepted ? "ACCEPT" : v.deferred ? "HOLD" : "REJECT", core::toString(v.reason), v.score, v.elapsed_ms);
+    takeDecisions();
   };
   // Snapshot k (1..K) is taken once the first ceil(k * N / K) keyframes have been handled.
   size_t next_snapshot = 1, handled_keyframes = 0;
@@ -207,6 +239,7 @@ int main(int argc, char** argv) {
       continue;
     }
     if (st.warning() && !quiet) std::printf("keyframe warning: %s\n", st.message.c_str());
+    takeDecisions();
     stamp_of[k.index] = k.stamp;
     stamps.push_back(k.stamp);
     odometry.push_back(k.vio);
@@ -220,6 +253,18 @@ int main(int argc, char** argv) {
   }
   // Candidates whose query keyframe never arrived: still a verdict each (invalid input).
   for (const auto& left : by_query) handle(s.candidates[left.second]);
+  // Still held when the run ends: not confirmed.
+  for (Row& r : rows) {
+    if (!r.verdict.deferred) continue;
+    r.verdict.deferred = false;
+    r.verdict.reason = core::Reason::kUnconfirmed;
+    r.verdict.detail = "still held when the run ended (" + r.verdict.detail + ")";
+  }
+  for (const Row& r : rows) {
+    if (r.label == 1) (r.verdict.accepted ? tp : fn)++;
+    if (r.label == 0) (r.verdict.accepted ? fp : tn)++;
+    std::fprintf(csv, "%s\n", core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay").c_str());
+  }
   // Snapshots still due (the last keyframes were refused).
   for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);
   std::fclose(csv);

@@ -1,0 +1,110 @@
+#include "rover_loop_fusion/core/drift.h"
+
+#include <algorithm>
+
+namespace rover_loop_fusion {
+namespace core {
+
+namespace {
+
+/// E = [e_z]x: d(Rz(yaw) x)/d yaw at yaw = 0 is E x.
+Eigen::Matrix3d yawGenerator() {
+  Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
+  E(0, 1) = -1.0;
+  E(1, 0) = 1.0;
+  return E;
+}
+
+}  // namespace
+
+Eigen::Matrix4d DriftModel::stepCovariance(double length) const {
+  const double l = std::max(length, min_step);
+  Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
+  C(0, 0) = C(1, 1) = sigma_xy * sigma_xy * l;
+  C(2, 2) = sigma_z * sigma_z * l;
+  C(3, 3) = sigma_yaw * sigma_yaw * l;
+  return C;
+}
+
+void ChainMoments::Sums::add(const Sums& o, double sign) {
+  A += sign * o.A;
+  b += sign * o.b;
+  Bp += sign * o.Bp;
+  c += sign * o.c;
+  cp += sign * o.cp;
+  Cpp += sign * o.Cpp;
+}
+
+void ChainMoments::clear() {
+  p_.clear();
+  R_.clear();
+  cov_.clear();
+  checkpoints_.clear();
+}
+
+void ChainMoments::append(const Eigen::Vector3d& p, const Eigen::Matrix3d& R,
+                          const Eigen::Matrix4d& step_cov) {
+  p_.push_back(p);
+  R_.push_back(R);
+  cov_.push_back(p_.size() == 1 ? Eigen::Matrix4d::Zero() : step_cov);
+  const size_t k = p_.size() - 1;
+  if (k % kStride == 0) {
+    if (k == 0) {
+      checkpoints_.push_back(Sums());
+    } else {
+      Sums s = checkpoints_.back();
+      for (size_t j = k - kStride + 1; j <= k; ++j) s.add(step(j), 1.0);
+      checkpoints_.push_back(s);
+    }
+  }
+}
+
+ChainMoments::Sums ChainMoments::step(size_t j) const {
+  Sums s;
+  if (j == 0) return s;
+  const Eigen::Matrix4d& S = cov_[j];
+  const Eigen::Matrix3d& Rj = R_[j];
+  const Eigen::Vector3d& pj = p_[j];
+  s.A = Rj * S.topLeftCorner<3, 3>() * Rj.transpose();
+  s.b = Rj * S.topRightCorner<3, 1>();
+  s.Bp = s.b * pj.transpose();
+  s.c = S(3, 3);
+  s.cp = s.c * pj;
+  s.Cpp = s.c * pj * pj.transpose();
+  return s;
+}
+
+ChainMoments::Sums ChainMoments::prefix(size_t k) const {
+  const size_t i = k / kStride;
+  Sums s = checkpoints_[i];
+  for (size_t j = i * kStride + 1; j <= k; ++j) s.add(step(j), 1.0);
+  return s;
+}
+
+Eigen::Matrix4d ChainMoments::cross(size_t a, size_t k, size_t b) const {
+  Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
+  if (k <= a) return C;
+  Sums s = prefix(k);
+  s.add(prefix(a), -1.0);
+  const Eigen::Matrix3d E = yawGenerator();
+  const Eigen::Vector3d& pk = p_[k];
+  const Eigen::Vector3d& pb = p_[b];
+  // sum W_yy (pk - pj)(pb - pj)^T
+  const Eigen::Matrix3d Sdd = s.c * pk * pb.transpose() - pk * s.cp.transpose() - s.cp * pb.transpose() + s.Cpp;
+  C.topLeftCorner<3, 3>() = s.A + E * (pk * s.b.transpose() - s.Bp.transpose()) +
+                            (s.b * pb.transpose() - s.Bp) * E.transpose() + E * Sdd * E.transpose();
+  C.topRightCorner<3, 1>() = s.b + E * (s.c * pk - s.cp);
+  C.bottomLeftCorner<1, 3>() = (s.b + E * (s.c * pb - s.cp)).transpose();
+  C(3, 3) = s.c;
+  return C;
+}
+
+Eigen::Matrix4d ChainMoments::relative(size_t a, size_t b, const Eigen::Matrix3d& Ra) const {
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T.topLeftCorner<3, 3>() = Ra.transpose();
+  const Eigen::Matrix4d C = cross(a, b, b);
+  return T * C * T.transpose();
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion
