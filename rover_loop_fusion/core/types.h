@@ -29,6 +29,7 @@ enum class Alignment { kSE3, kSim3 };
 /// kChi2: in units of drift: the innovation's Mahalanobis distance under the uncertainty of the
 ///   relative pose through the graph (drift model + accepted loops) against a chi-square
 ///   quantile, and the look-alike test (no look-alike place explains the candidate better).
+///   4-DoF only for now: a 6-DoF (VO) verifier decides kMetric whatever this says.
 enum class Decision { kMetric, kChi2 };
 
 /// Why a verdict came out the way it did. Exactly one per verdict.
