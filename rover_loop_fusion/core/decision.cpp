@@ -59,11 +59,12 @@ double deformationScore(const Eigen::Matrix3Xd& before, const Eigen::Matrix3Xd& 
 
 Check scoreTest(const SolveSummary& trial, double score, double threshold, int window_size,
                 double time_budget_ms) {
-  if (trial.timed_out)
-    return fail(Reason::kTimeBudgetExceeded, "trial optimisation ran past time_budget_ms=" +
-                                                 std::to_string(time_budget_ms) + ": " + trial.message);
   std::ostringstream s;
   s.precision(3);
+  if (trial.timed_out) {
+    s << "trial optimisation stopped by time_budget_ms " << time_budget_ms << ": " << trial.message;
+    return fail(Reason::kTimeBudgetExceeded, s.str());
+  }
   if (!trial.converged || !trial.finite || !std::isfinite(score)) {
     s << "trial optimisation did not converge after " << trial.iterations << " iterations ("
       << (trial.finite ? trial.message : "non-finite solution") << ")";

@@ -128,7 +128,8 @@ std::vector<Parameter> makeTable() {
   t.push_back(integer("max_iterations", "", &C::max_iterations, 1, 1000,
                       "trial solve iteration limit; hitting it rejects (not_converged)"));
   t.push_back(number("time_budget_ms", "ms", &C::time_budget_ms, 0.0, 60000.0, false,
-                     "trial solve time limit; running past it rejects (time_budget_exceeded); 0: none"));
+                     "time limit of a verification: a trial solve that would not finish in time is not "
+                     "started or is stopped, and rejects (time_budget_exceeded); 0: none"));
   // Measured on the shipped scenarios (docs/design-notes.md): 1e-2 let 4-23 of 80 trial solves
   // per scenario stop at iteration 0 and moved scores by up to 0.39 m; >= 0.5 let false loops in.
   t.push_back(number("function_tolerance", "", &C::function_tolerance, 0.0, 1e-3, true,

@@ -31,6 +31,72 @@ bool unitQuaternion(const Eigen::Quaterniond& q, double tol) {
 
 std::string describeIndex(int64_t i) { return std::to_string(static_cast<long long>(i)); }
 
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+/// Stops a Ceres solve before an iteration that would end past the deadline. Ceres' own
+/// max_solver_time_in_seconds only looks at the time already spent, so an iteration started
+/// just before the limit runs to its end (531 ms on a 20k-keyframe window). The next
+/// iteration is predicted as long as the last one, or, after Ceres' initial evaluation, as
+/// `first_iteration_ms` (the first iteration also analyses the sparsity: the dearest one).
+class DeadlineCallback : public ceres::IterationCallback {
+ public:
+  DeadlineCallback(Clock::time_point deadline, double first_iteration_ms)
+      : deadline_(deadline), first_iteration_ms_(first_iteration_ms) {}
+
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& it) override {
+    double next = first_iteration_ms_;
+    if (it.iteration > 0) {
+      next = 1e3 * it.iteration_time_in_seconds;
+      longest_ms = std::max(longest_ms, next);
+      iterations_ms += next;
+    }
+    const double left = std::chrono::duration<double, std::milli>(deadline_ - Clock::now()).count();
+    if (next <= left) return ceres::SOLVER_CONTINUE;
+    std::ostringstream s;
+    s.precision(3);
+    s << "stopped after " << it.iteration << " iterations: the next one (~" << next << " ms) would end past the budget ("
+      << std::max(0.0, left) << " ms left)";
+    stop_reason = s.str();
+    return ceres::SOLVER_ABORT;
+  }
+
+  std::string stop_reason;  ///< empty unless the callback stopped the solve
+  double longest_ms = 0;    ///< longest iteration (without Ceres' initial evaluation)
+  double iterations_ms = 0;
+
+ private:
+  Clock::time_point deadline_;
+  double first_iteration_ms_;
+};
+
+/// A cost per window keyframe [ms], learned from measured trials as TCP learns a round-trip
+/// time: a moving average and its mean deviation (25 % per measurement), predicting the
+/// average + 2 deviations. The first measurement replaces the guess, with half its value as
+/// deviation.
+struct CostRate {
+  explicit CostRate(double guess_ms) : mean(guess_ms) {}
+  double mean;
+  double deviation = 0;
+  bool measured = false;
+  double predict() const { return mean + 2 * deviation; }
+  void learn(double observed) {
+    if (!measured) {
+      mean = observed;
+      deviation = observed / 2;
+      measured = true;
+      return;
+    }
+    deviation = 0.75 * deviation + 0.25 * std::abs(observed - mean);
+    mean = 0.75 * mean + 0.25 * observed;
+  }
+};
+
+/// Part of a trial's time budget kept for what follows the solve: the problem's teardown
+/// and the scoring (both grow with the window).
+constexpr double kBudgetAfterSolve = 0.1;
+
 /// A rigid correction: 4-DoF keeps it to yaw + translation.
 struct Correction {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
@@ -105,6 +171,13 @@ struct PoseGraph::Impl {
   Suspect suspect;
   int next_segment = -1;
   bool warned_loaded_map_stamps = false;
+  /// What a budgeted trial costs on this machine per window keyframe, learned from the
+  /// budgeted solves of >= 500 keyframes so far (below, fixed costs dominate): setup (build,
+  /// Ceres' preprocessing and initial evaluation, teardown) and the longest iteration. Before
+  /// the first such solve, a cautious guess (1k-20k-keyframe 4-DoF windows on a loaded 2-core
+  /// VM: ~10 + ~30 us per keyframe; 3x for 6-DoF).
+  CostRate setup_cost{0.010};
+  CostRate iteration_cost{0.030};
 
   explicit Impl(const VerifierConfig& c)
       : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
@@ -114,6 +187,10 @@ struct PoseGraph::Impl {
     drift.sigma_z = c.drift_z;
     drift.sigma_yaw = c.drift_yaw;
     drift.min_step = c.drift_min_step;
+    if (!fourDof()) {  // autodiff 6-DoF residuals: 2-7x the 4-DoF cost (docs/results.md)
+      setup_cost.mean *= 3;
+      iteration_cost.mean *= 3;
+    }
   }
 
   bool fourDof() const { return cfg.mode == Mode::kFourDof; }
@@ -159,7 +236,13 @@ struct PoseGraph::Impl {
   /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
   void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
                   ceres::LossFunction* extra_loss);
-  SolveSummary solve(Trial& tr, int max_iterations, double time_budget_ms);
+  /// Solves `tr` within the time left until start + time_budget_ms (<= 0: no limit): the
+  /// callback stops it before an iteration that would end past that; the state keeps the
+  /// last iterate. `callback` (optional) receives the iteration times.
+  SolveSummary solve(Trial& tr, int max_iterations, double time_budget_ms, Clock::time_point start,
+                     DeadlineCallback* callback = nullptr);
+  /// Learns setup_cost / iteration_cost from a budgeted trial.
+  void learnCost(size_t window, double total_ms, const DeadlineCallback& callback);
   double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
   /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
   /// chain distances), so the cost grows with the number of loops, not of keyframes.
@@ -420,11 +503,16 @@ void PoseGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool fr
   if (extra) addEdge(tr, *extra, extra_loss);
 }
 
-SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms) {
+SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms,
+                                    Clock::time_point start, DeadlineCallback* callback) {
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   options.max_num_iterations = std::max(1, max_iterations);
-  if (time_budget_ms > 0) options.max_solver_time_in_seconds = time_budget_ms / 1000.0;
+  if (time_budget_ms > 0) {
+    options.max_solver_time_in_seconds = std::max(0.0, time_budget_ms - msSince(start)) / 1000.0;
+    if (callback) options.callbacks.push_back(callback);
+    options.update_state_every_iteration = true;  // a stopped solve keeps its last iterate
+  }
   options.num_threads = 1;
   options.function_tolerance = cfg.function_tolerance;
   options.logging_type = ceres::SILENT;
@@ -434,13 +522,14 @@ SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_b
   ceres::Solve(options, &tr.problem, &summary);
   ++solves;
   SolveSummary o;
-  o.solve_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  o.solve_ms = msSince(t0);
   // summary.iterations holds iteration 0 (the initial evaluation) too.
   o.iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
   o.converged = summary.termination_type == ceres::CONVERGENCE;
-  o.timed_out = summary.termination_type == ceres::NO_CONVERGENCE && time_budget_ms > 0 &&
-                summary.message.find("time") != std::string::npos;
-  o.message = summary.message;
+  const bool stopped = callback && !callback->stop_reason.empty();
+  o.timed_out = stopped || (summary.termination_type == ceres::NO_CONVERGENCE && time_budget_ms > 0 &&
+                            summary.message.find("time") != std::string::npos);
+  o.message = stopped ? callback->stop_reason : summary.message;
   o.finite = true;
   for (const KeyframeState& s : tr.states) {
     if (!std::isfinite(s.t[0]) || !std::isfinite(s.t[1]) || !std::isfinite(s.t[2]) ||
@@ -450,6 +539,12 @@ SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_b
     }
   }
   return o;
+}
+
+void PoseGraph::Impl::learnCost(size_t window, double total_ms, const DeadlineCallback& callback) {
+  if (window < 500 || callback.longest_ms <= 0) return;
+  setup_cost.learn(std::max(0.0, total_ms - callback.iterations_ms) / window);
+  iteration_cost.learn(callback.longest_ms / window);
 }
 
 double PoseGraph::Impl::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
@@ -939,7 +1034,35 @@ double PoseGraph::pathLength(size_t from, size_t to) const { return impl_->pathL
 
 TrialSolution PoseGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandidate* candidate,
                                      bool robust_candidate, int max_iterations, double time_budget_ms) {
+  const auto start = Clock::now();
   Impl& m = *impl_;
+  TrialSolution out;
+  const size_t first = m.windowStart(mpos);
+  const size_t window = m.kfs.size() - first;  // the trial's keyframes, at most
+  const double first_iteration_ms = window * m.iteration_cost.predict();
+  const double solve_budget_ms = (1.0 - kBudgetAfterSolve) * time_budget_ms;
+  if (time_budget_ms > 0) {
+    // Neither building the problem nor one Ceres iteration can be interrupted: a trial that
+    // cannot reach the end of its first iteration within the budget is not started.
+    const double predicted = window * m.setup_cost.predict() + first_iteration_ms;
+    if (predicted > solve_budget_ms) {
+      std::ostringstream s;
+      s.precision(3);
+      s << "not started: a trial over " << window << " keyframes would need ~" << predicted
+        << " ms to the end of its first iteration (" << 1e3 * predicted / window << " us per keyframe, "
+        << (m.iteration_cost.measured ? "measured on this graph's solves" : "a cautious guess before the first solve")
+        << "), more than the " << solve_budget_ms << " ms left for the solve";
+      out.summary.timed_out = true;
+      out.summary.finite = true;
+      out.summary.message = s.str();
+      // A refusal measures nothing: without this, one slow solve (a load spike) would keep
+      // every trial of its size out for good. Halving the deviations lets a trial that fits
+      // the average be tried again after a few refusals.
+      m.setup_cost.deviation *= 0.5;
+      m.iteration_cost.deviation *= 0.5;
+      return out;
+    }
+  }
   Impl::Edge extra;
   if (candidate) {
     extra.from = mpos;
@@ -947,13 +1070,18 @@ TrialSolution PoseGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandida
     extra.loop = *candidate;
     m.setLoopCost(extra);
   }
-  Impl::Trial tr;
-  m.buildTrial(tr, m.windowStart(mpos), m.root(m.kfs[qpos].segment), false, candidate ? &extra : nullptr,
-               robust_candidate ? m.huber.get() : nullptr);
-  TrialSolution out;
-  out.summary = m.solve(tr, max_iterations, time_budget_ms);
-  out.positions = std::move(tr.positions);
-  out.states = std::move(tr.states);
+  DeadlineCallback callback(start + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double, std::milli>(std::max(0.0, solve_budget_ms))),
+                            first_iteration_ms);
+  {
+    Impl::Trial tr;
+    m.buildTrial(tr, first, m.root(m.kfs[qpos].segment), false, candidate ? &extra : nullptr,
+                 robust_candidate ? m.huber.get() : nullptr);
+    out.summary = m.solve(tr, max_iterations, time_budget_ms, start, &callback);
+    out.positions = std::move(tr.positions);
+    out.states = std::move(tr.states);
+  }  // the problem's teardown is part of the trial's cost
+  if (time_budget_ms > 0) m.learnCost(window, msSince(start), callback);
   return out;
 }
 
@@ -991,7 +1119,7 @@ BatchSolveResult PoseGraph::solveLikeLoopFusion(int max_iterations) const {
   for (const Impl::Edge& e : m.loops) first = std::min(first, e.from);
   Impl::Trial tr;
   m.buildTrial(tr, first, kEverySegment, true, nullptr, nullptr);
-  const SolveSummary o = m.solve(tr, max_iterations, 0.0);
+  const SolveSummary o = m.solve(tr, max_iterations, 0.0, Clock::now());
   r.iterations = o.iterations;
   r.solve_ms = o.solve_ms;
   r.free_keyframes = static_cast<int>(tr.positions.size());

@@ -116,7 +116,11 @@ class PoseGraph {
   /// Solves the window [match - window_margin, newest] of the query's connected sequences,
   /// warm-started from X, with `candidate` as an extra loop edge (nullptr: none; robust: with
   /// the committed loops' Huber loss). The window's first keyframe and sequence 0 are held
-  /// fixed, older keyframes too. Does not change the graph. time_budget_ms <= 0: no limit.
+  /// fixed, older keyframes too. Does not change the graph. time_budget_ms <= 0: no limit;
+  /// otherwise the call returns by it: a trial that cannot finish building and one iteration
+  /// within it (at the cost per keyframe measured on this graph's solves so far) is not
+  /// started, and the solve stops before an iteration that would end past it (both:
+  /// summary.timed_out, with why in summary.message; a stopped solve keeps its last iterate).
   TrialSolution solveWindow(size_t match_pos, size_t query_pos, const LoopCandidate* candidate,
                             bool robust_candidate, int max_iterations, double time_budget_ms);
   /// Positions of the keyframes of a solution that may move (not sequence 0), in X (`before`)

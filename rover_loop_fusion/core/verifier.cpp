@@ -6,6 +6,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -126,8 +127,11 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   const Check gate = innovationGate(config_, measured.innovation, measured.path_length);
   if (!gate.passed) return reject(gate.reason, gate.detail);
 
+  // The budget counts from the call: what the checks above took is spent.
+  const double budget_left =
+      config_.time_budget_ms > 0 ? std::max(1e-3, config_.time_budget_ms - msSince(t0)) : 0.0;
   TrialSolution trial = graph_.solveWindow(mpos, qpos, &c, config_.robust_candidate,
-                                           config_.max_iterations, config_.time_budget_ms);
+                                           config_.max_iterations, budget_left);
   const SolveSummary& o = trial.summary;
   measured.iterations = o.iterations;
   measured.solve_ms = o.solve_ms;
@@ -160,12 +164,12 @@ Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
                      p.candidate.relative_t == c.relative_t &&
                      p.candidate.relative_q.coeffs() == c.relative_q.coeffs() &&
                      p.candidate.relative_yaw == c.relative_yaw;
+  size_t qpos = 0, mpos = 0;
+  const bool prior = graph_.find(c.query_index, &qpos) && graph_.find(c.match_index, &mpos) &&
+                     graph_.connected(qpos, mpos);
   const Status added = graph_.addLoop(c);
   if (!added) return Status::Error("commit refused: " + added.message);
   pending_.valid = false;
-  size_t qpos = 0, mpos = 0;
-  graph_.find(c.query_index, &qpos);
-  graph_.find(c.match_index, &mpos);
   if (usesChi2()) {
     if (reuse) {
       calibration_.push_back({p.innovation, p.chain_covariance});
@@ -180,11 +184,20 @@ Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
     graph_.adopt(p.solution);
     return Status::Ok();
   }
+  if (!update_estimate) return Status::Ok();  // the caller solves once for a group (release())
   if (graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) return Status::Ok();  // both fixed
-  const TrialSolution s = graph_.solveWindow(mpos, qpos, nullptr, false, config_.max_iterations, 0.0);
+  // A loop accepted without a prior is committed in the host's loop-closure path, right after
+  // its verdict: bounded like a verification. Other loops committed without their accepting
+  // verify() (rover_replay's oracle protocol, overrides) are solved to convergence, so that
+  // what they build does not depend on the machine's load.
+  const TrialSolution s = graph_.solveWindow(mpos, qpos, nullptr, false, config_.max_iterations,
+                                             prior ? 0.0 : config_.time_budget_ms);
   if (!s.summary.finite)  // the loop is in the graph (the host uses it); X keeps its old values
     return Status::Warning("loop committed but the update of the estimate failed (" + s.summary.message + ")");
-  graph_.adopt(s);
+  graph_.adopt(s);  // a solve stopped by the budget still moved X towards the loop
+  if (s.summary.timed_out)
+    return Status::Warning("loop committed; the update of the estimate stopped at time_budget_ms (" +
+                           s.summary.message + "): the next accepted loop's solve continues from there");
   return Status::Ok();
 }
 
@@ -417,9 +430,11 @@ void Verifier::release(const std::vector<Held>& group) {
   if (usesChi2()) {
     graph_.updateEstimate(committed.back()->query_pos, drift_scale_);
   } else {
+    // In the host's loop-closure path like a commit: bounded when the group had no prior.
     const Held& last = *committed.back();
     const TrialSolution sol = graph_.solveWindow(committed.front()->match_pos, last.query_pos, nullptr, false,
-                                                 config_.max_iterations, 0.0);
+                                                 config_.max_iterations,
+                                                 committed.front()->no_prior ? config_.time_budget_ms : 0.0);
     if (sol.summary.finite) graph_.adopt(sol);
   }
 }

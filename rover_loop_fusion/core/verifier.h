@@ -88,7 +88,9 @@ class Verifier {
 
   /// Adds a loop edge that the host is going to use and updates X. If the last verify()
   /// accepted this very candidate, its X* is kept (no second solve); otherwise (stored loops
-  /// of a loaded map, loops accepted without a prior, an override) the graph is solved once.
+  /// of a loaded map, loops accepted without a prior, an override) the graph is solved once:
+  /// for a loop without a prior within time_budget_ms (a Warning says when the budget stopped
+  /// that update of X), otherwise to convergence.
   /// A first loop between two sequences anchors the query's sequence to the match's frame
   /// exactly as loop_fusion shifts it (w_r_vio / w_t_vio). (A graph that only collects loops,
   /// solved once at the end: PoseGraph::addLoop.)

@@ -44,9 +44,9 @@ struct LapsOptions {
   double candidate_sigma_yaw = 0.005;
   int min_gap = 50;          ///< keyframes between query and match (loop_fusion: 50)
   double revisit_radius = 0.6;  ///< a ground-truth revisit is closer than this [m]
-  int true_every = 5;        ///< take every n-th revisit keyframe as a true candidate
+  int true_every = 5;        ///< take every n-th revisit keyframe as a true candidate (<= 0: none)
   double false_offset = 3.0; ///< false candidates: look-alike place this far away [m]
-  int false_every = 5;       ///< one false candidate every n-th revisit keyframe
+  int false_every = 5;       ///< one false candidate every n-th revisit keyframe (<= 0: none)
   uint32_t seed = 7;
 };
 
