@@ -1012,6 +1012,55 @@ TEST_F(Adapter, HeldLoopsAreAppliedWhenReleasedRemovedWhenRevokedAndSavedOnlyWhi
   std::remove(file.c_str());
 }
 
+TEST_F(Adapter, AReleasedFirstLoopOfAnEarlierSessionShiftsThatSessionOnly) {
+  // A loaded map (sequence 0), session 1 holds its first loop into the map, session 2 starts
+  // before the verifier releases it. useLoop shifts session 1 into the map's frame (the
+  // released query once) and leaves w_r_vio / w_t_vio, the shift of the keyframes still to come
+  // (session 2's), alone.
+  std::shared_ptr<ScriptedVerifier::Script> script = std::make_shared<ScriptedVerifier::Script>();
+  script->hold = {15};
+  FakePoseGraph pg;
+  pg.use_imu = true;
+  ASSERT_TRUE(pg.rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new ScriptedVerifier(script)),
+                                              "test/Scripted"));
+  for (int i = 0; i < 10; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = 1.0 + i;
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0.0, 0.0);
+    ASSERT_TRUE(pg.loadKeyFrame(kf));
+  }
+  const Eigen::Matrix3d turned = yawR(40.0);
+  for (int i = 10; i < 30; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = 1.0 + i;
+    kf.sequence = i < 20 ? 1 : 2;
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * (i % 10), 7.0 * kf.sequence, 0.0);
+    kf.vio_R_w_i = turned;
+    if (i == 25) script->decide(core::LoopDecision::Kind::kRelease, 15, 5);
+    if (i == 15) {
+      // findConnection: keyframe 15 is where keyframe 5 is, facing the same way
+      const Eigen::Quaterniond q(turned.transpose());
+      const Detection d{5, (LoopInfo() << 0, 0, 0, q.w(), q.x(), q.y(), q.z(), -40.0).finished(), 30};
+      EXPECT_FALSE(pg.addKeyFrame(kf, &d).has_loop);
+    } else {
+      pg.addKeyFrame(kf, nullptr);
+    }
+  }
+  const FakeKeyFrame& released = pg.keyframelist.at(15);
+  EXPECT_TRUE(released.has_loop);
+  EXPECT_EQ(released.loop_index, 5);
+  EXPECT_LT((released.vio_T_w_i - pg.keyframelist.at(5).vio_T_w_i).norm(), 1e-9) << released.vio_T_w_i.transpose();
+  EXPECT_LT((pg.keyframelist.at(16).vio_T_w_i - Eigen::Vector3d(3.0, 0.0, 0.0)).norm(), 1e-9)
+      << "the rest of session 1 follows";
+  EXPECT_EQ(pg.sequence_loop, (std::vector<int>{0, 1, 0}));
+  EXPECT_TRUE(pg.w_r_vio.isIdentity());
+  EXPECT_TRUE(pg.w_t_vio.isZero());
+  for (int i = 20; i < 30; ++i)
+    EXPECT_LT((pg.keyframelist.at(i).vio_T_w_i - Eigen::Vector3d(0.5 * (i % 10), 14.0, 0.0)).norm(), 1e-12) << i;
+  EXPECT_EQ(pg.optimize_buf, (std::vector<int>{15, 25}));
+  EXPECT_EQ(pg.earliest_loop_index, 5);
+}
+
 TEST_F(Adapter, HostDerivedKeysInTheVerifierYamlAreIgnoredWithAnError) {
   // anchor_incoming_keyframes: true would make the verifier shift the session a second time on
   // top of loop_fusion's w_r_vio / w_t_vio (later loops would look metres off and be rejected);
