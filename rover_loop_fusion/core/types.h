@@ -115,6 +115,20 @@ struct Verdict {
   static Verdict Defer(const LoopCandidate& candidate, std::string detail);
 };
 
+/// A decision about a candidate made after verify() returned for it (Verifier::takeDecisions;
+/// here so that the plugin interface can hand them on without the verifier's header).
+struct LoopDecision {
+  enum class Kind {
+    kRelease,  ///< a held candidate accepted (and committed by the verifier)
+    kDrop,     ///< a held candidate rejected (reason kUnconfirmed)
+    kRevoke,   ///< an accepted loop removed again (reason kRevoked)
+  };
+  Kind kind = Kind::kDrop;
+  LoopCandidate candidate;  ///< as handed to verify()
+  Verdict verdict;          ///< the final verdict: accepted for kRelease, rejected otherwise
+};
+const char* toString(LoopDecision::Kind kind);  // "release", "drop", "revoke"
+
 /// One keyframe of a trajectory, as reported by Verifier::trajectory(), PoseGraph::trajectory()
 /// and the plugins.
 struct TrajectoryPoint {

@@ -46,19 +46,6 @@
 namespace rover_loop_fusion {
 namespace core {
 
-/// A decision about a candidate made after verify() returned for it.
-struct LoopDecision {
-  enum class Kind {
-    kRelease,  ///< a held candidate accepted (and committed by the verifier)
-    kDrop,     ///< a held candidate rejected (reason kUnconfirmed)
-    kRevoke,   ///< an accepted loop removed again (reason kRevoked)
-  };
-  Kind kind = Kind::kDrop;
-  LoopCandidate candidate;  ///< as handed to verify()
-  Verdict verdict;          ///< the final verdict: accepted for kRelease, rejected otherwise
-};
-const char* toString(LoopDecision::Kind kind);  // "release", "drop", "revoke"
-
 class Verifier {
  public:
   /// An invalid config is replaced by the defaults; configError() says why.

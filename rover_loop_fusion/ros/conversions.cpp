@@ -119,6 +119,8 @@ LoopVerdict toVerdictMsg(const core::Verdict& v, const VerdictContext& ctx, cons
   m.elapsed_ms = v.elapsed_ms;
   m.inliers = ctx.inliers;
   m.verifier = ctx.verifier;
+  m.final = !v.deferred;
+  m.decision = ctx.decision;
   return m;
 }
 

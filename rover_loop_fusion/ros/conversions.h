@@ -49,6 +49,9 @@ struct VerdictContext {
   double match_stamp = 0.0;
   int inliers = -1;
   std::string verifier;  ///< plugin type
+  /// How the verdict came about: verify (when the candidate was verified), or the later
+  /// decision on it: release, drop, revoke (LoopVerdict.msg).
+  std::string decision = "verify";
   bool have_positions = false;  ///< draw a marker only when both positions are known
   Eigen::Vector3d query_position = Eigen::Vector3d::Zero();
   Eigen::Vector3d match_position = Eigen::Vector3d::Zero();

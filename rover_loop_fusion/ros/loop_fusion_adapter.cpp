@@ -11,10 +11,14 @@
 #include <ros/init.h>
 #include <ros/this_node.h>
 
+#include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <mutex>
+#include <map>
 #include <unordered_map>
+#include <utility>
 
 namespace rover_loop_fusion {
 
@@ -66,6 +70,14 @@ struct LoopFusionAdapter::Impl {
   std::unordered_map<int64_t, KeyframeInfo> keyframes;
   RepeatedWarning refused_keyframes;
   size_t verdicts = 0;
+  /// Held candidates: what findConnection found, to hand back to loop_fusion on a release.
+  struct Held {
+    std::array<double, 8> loop_info;
+    int inliers;
+  };
+  std::map<std::pair<int64_t, int64_t>, Held> held;
+  /// Released and revoked loops not yet taken by loop_fusion (takeLaterLoops).
+  std::vector<LoopFusionAdapter::LaterLoop> later;
 
   /// start() that never throws: an exception leaves the adapter failed (loops rejected).
   bool safeStart(bool use_imu, VerifierPtr injected, const std::string& injected_type);
@@ -81,7 +93,69 @@ struct LoopFusionAdapter::Impl {
     *position = k->second.position;
     return true;
   }
+  /// Logs and publishes a verdict (with the candidate's stamps and a marker).
+  void publish(const core::Verdict& v, VerdictContext ctx);
+  /// After every addKeyframe and verify: the verifier's later decisions become verdicts, and
+  /// releases and revocations LaterLoops for loop_fusion. Call with `mutex` held.
+  void collectDecisions();
 };
+
+void LoopFusionAdapter::Impl::publish(const core::Verdict& v, VerdictContext ctx) {
+  ctx.query_stamp = stamp(v.query_index);
+  ctx.match_stamp = stamp(v.match_index);
+  const std::string described = "loop " + std::to_string(v.query_index) + " -> " + std::to_string(v.match_index) +
+                                " (stamps " + stampText(ctx.query_stamp) + " -> " + stampText(ctx.match_stamp) + ")";
+  if (host->publish(v, ctx, described, [&](int64_t i, Eigen::Vector3d* p) { return vioPosition(i, p); }))
+    ++verdicts;
+}
+
+void LoopFusionAdapter::Impl::collectDecisions() {
+  if (mode != Mode::kVerifying) return;
+  for (const core::LoopDecision& d : host->takeDecisions()) {
+    const core::LoopCandidate& c = d.candidate;
+    const std::pair<int64_t, int64_t> key(c.query_index, c.match_index);
+    core::Verdict v = d.verdict;
+    v.query_index = c.query_index;
+    v.match_index = c.match_index;
+    v.deferred = false;
+    VerdictContext ctx;
+    ctx.verifier = host->verifierType();
+    ctx.decision = core::toString(d.kind);
+    ctx.inliers = c.inliers;
+    auto h = held.find(key);
+    if (d.kind != core::LoopDecision::Kind::kDrop) {
+      LoopFusionAdapter::LaterLoop l;
+      l.use = d.kind == core::LoopDecision::Kind::kRelease;
+      l.index = static_cast<int>(c.query_index);
+      l.match_index = static_cast<int>(c.match_index);
+      l.inliers = l.use ? c.inliers : -1;
+      for (int i = 0; i < 8; ++i) l.loop_info[i] = 0.0;
+      if (l.use && h != held.end()) {
+        // Exactly what findConnection stored on the keyframe.
+        for (int i = 0; i < 8; ++i) l.loop_info[i] = h->second.loop_info[i];
+        l.inliers = h->second.inliers;
+      } else if (l.use) {
+        // Not held here (cannot happen with the shipped plugins): from the candidate.
+        const double info[8] = {c.relative_t.x(), c.relative_t.y(), c.relative_t.z(), c.relative_q.w(),
+                                c.relative_q.x(), c.relative_q.y(), c.relative_q.z(), c.relative_yaw * 180.0 / M_PI};
+        for (int i = 0; i < 8; ++i) l.loop_info[i] = info[i];
+      }
+      if (keyframes.count(c.query_index) && keyframes.count(c.match_index)) {
+        later.push_back(l);
+      } else {
+        // loop_fusion has no such keyframe: it cannot use (or still hold) the loop.
+        ROS_ERROR("[rover] the verifier's %s of loop %ld -> %ld names a keyframe loop_fusion never registered: "
+                  "not applied", ctx.decision.c_str(), static_cast<long>(c.query_index),
+                  static_cast<long>(c.match_index));
+      }
+    }
+    if (h != held.end()) {
+      ctx.inliers = h->second.inliers;
+      held.erase(h);
+    }
+    publish(v, ctx);
+  }
+}
 
 void LoopFusionAdapter::Impl::fatal(const std::string& message) {
   mode = Mode::kFailed;
@@ -167,6 +241,7 @@ void LoopFusionAdapter::addKeyframe(int index, double stamp, int sequence, const
     if (!s.ok)
       m.refused_keyframes.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + s.message +
                                "); loops that involve it are rejected");
+    m.collectDecisions();
   });
 }
 
@@ -212,12 +287,24 @@ bool LoopFusionAdapter::verifyLoop(int query_index, int match_index, const LoopI
     }
     accepted = v.accepted;
     if (!m.host) return;
-    const std::string described =
-        what + " (stamps " + stampText(ctx.query_stamp) + " -> " + stampText(ctx.match_stamp) + ")";
-    if (m.host->publish(v, ctx, described, [&](int64_t i, Eigen::Vector3d* p) { return m.vioPosition(i, p); }))
-      ++m.verdicts;
+    if (v.deferred) {
+      Impl::Held& h = m.held[std::make_pair(c.query_index, c.match_index)];
+      for (int i = 0; i < 8; ++i) h.loop_info[i] = loop_info(i);
+      h.inliers = inliers;
+    }
+    m.publish(v, ctx);
+    m.collectDecisions();
   });
   return accepted;
+}
+
+std::vector<LoopFusionAdapter::LaterLoop> LoopFusionAdapter::takeLaterLoops() {
+  std::vector<LaterLoop> out;
+  guarded("takeLaterLoops (released or revoked loops lost)", [&] {
+    std::lock_guard<std::mutex> lock(impl_->mutex);
+    out.swap(impl_->later);
+  });
+  return out;
 }
 
 bool LoopFusionAdapter::verifyKeyframeLoop(int index, int inliers, bool& has_loop, int& loop_index,
@@ -260,6 +347,11 @@ bool LoopFusionAdapter::verifying() const {
 size_t LoopFusionAdapter::verdictCount() const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   return impl_->verdicts;
+}
+
+size_t LoopFusionAdapter::heldCount() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->held.size();
 }
 
 }  // namespace rover_loop_fusion

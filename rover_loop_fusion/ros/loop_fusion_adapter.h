@@ -6,6 +6,13 @@
 // own flags (-std=c++11) and include paths: it includes only the standard library and Eigen,
 // never ROS, pluginlib or Ceres headers (checked at build time, see CMakeLists.txt).
 //
+// Loops decided later: the verifier may hold a candidate (a deferred verdict; the loop is
+// dropped from the keyframe like a rejected one, so nothing uses or saves it) and decide about
+// it a few keyframes later, or revoke a loop it accepted. The patch applies such decisions at
+// the end of addKeyFrame (takeLaterLoops(), LaterLoop::apply()), where loop_fusion holds
+// m_keyframelist: a released loop is set on its keyframe and used like a loop accepted at once
+// (earliest_loop_index, the first-loop sequence shift, optimize_buf); a revoked one is removed.
+//
 // Host safety: no method throws. Errors are logged with ROS_ERROR and fail closed (the loop
 // is rejected). A verifier that cannot be set up from the parameters either falls back to
 // accepting every loop (only if ~fallback_to_accept_all is true) or stops the process with a
@@ -17,6 +24,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace rover_loop_fusion {
 
@@ -28,6 +36,27 @@ class LoopFusionAdapter {
   /// [t_x, t_y, t_z, q_w, q_x, q_y, q_z, relative_yaw_degrees], the query keyframe in the
   /// match keyframe's frame.
   typedef Eigen::Matrix<double, 8, 1> LoopInfo;
+
+  /// A loop decided after its keyframe's own verdict, for loop_fusion to apply to keyframe
+  /// `index` (takeLaterLoops()).
+  struct LaterLoop {
+    /// true: a held loop released: use it from now on; false: an accepted loop revoked:
+    /// remove it (the keyframe keeps no loop).
+    bool use;
+    int index;        ///< the query keyframe (loop_fusion's global index)
+    int match_index;  ///< the match keyframe
+    double loop_info[8];  ///< released: the keyframe's loop_info as findConnection set it
+    int inliers;      ///< released: the PnP inlier count, -1 if unknown
+    /// Sets the keyframe's loop fields: released: has_loop = true, loop_index = match_index,
+    /// loop_info, loop_inliers; revoked: as a keyframe without a loop (has_loop = false,
+    /// loop_index = -1, loop_info = 0, loop_inliers = -1), so that savePoseGraph does not save it.
+    void apply(bool& has_loop, int& loop_index, LoopInfo& info, int& loop_inliers) const {
+      has_loop = use;
+      loop_index = use ? match_index : -1;
+      for (int i = 0; i < 8; ++i) info(i) = use ? loop_info[i] : 0.0;
+      loop_inliers = use ? inliers : -1;
+    }
+  };
 
   /// Does not touch ROS (loop_fusion's PoseGraph is a global object built before ros::init).
   LoopFusionAdapter();
@@ -60,10 +89,11 @@ class LoopFusionAdapter {
 
   /// The hook after a successful KeyFrame::findConnection: verifies the loop findConnection
   /// has just stored in the keyframe (its has_loop, loop_index, loop_info, passed by reference)
-  /// with verifyLoop(). A loop that loop_fusion must not use is dropped from the keyframe:
-  /// has_loop = false, loop_index = -1, loop_info = 0, as a keyframe without a loop, so that
-  /// savePoseGraph does not save it (loadPoseGraph reads loop_index != -1 as a loop). Returns
-  /// true iff loop_fusion may use the loop. inliers: the PnP inlier count, -1 if unknown.
+  /// with verifyLoop(). A loop that loop_fusion must not use now (rejected, or held) is dropped
+  /// from the keyframe: has_loop = false, loop_index = -1, loop_info = 0, as a keyframe without
+  /// a loop, so that savePoseGraph does not save it (loadPoseGraph reads loop_index != -1 as a
+  /// loop); a held loop comes back through takeLaterLoops() if it is released. Returns true iff
+  /// loop_fusion may use the loop now. inliers: the PnP inlier count, -1 if unknown.
   bool verifyKeyframeLoop(int index, int inliers, bool& has_loop, int& loop_index, LoopInfo& loop_info);
 
   /// The hook in loadKeyFrame, after addKeyframe(): adds the stored loop of a loaded keyframe
@@ -74,8 +104,16 @@ class LoopFusionAdapter {
   /// Verifies a loop candidate; commits it when accepted and publishes the verdict. The
   /// candidate itself is published on ~loop_candidates first (rover_loop_fusion/LoopCandidate,
   /// keyframes named by stamp) so that a recorded run can be replayed through
-  /// rover_verifier_node. Returns true iff loop_fusion may use the loop.
+  /// rover_verifier_node. Returns true iff loop_fusion may use the loop now. A held candidate
+  /// gets a deferred verdict (false now); its final verdict follows when the verifier decides.
   bool verifyLoop(int query_index, int match_index, const LoopInfo& loop_info, int inliers = -1);
+
+  /// The loops decided since the last call (held loops released, accepted loops revoked),
+  /// oldest first, each for a keyframe loop_fusion has (addKeyframe() was called for both ends).
+  /// Their verdicts are already published. Call once per addKeyFrame, after the keyframe is in
+  /// keyframelist, holding m_keyframelist: for each, apply() to the keyframe; if `use`, do what
+  /// addKeyFrame does with an accepted loop; then queue one optimisation.
+  std::vector<LaterLoop> takeLaterLoops();
 
   /// Adds a loop stored in a loaded pose graph (loadPoseGraph) without verifying it: both
   /// keyframes belong to the loaded map, which loop_fusion holds fixed. Not published.
@@ -84,8 +122,10 @@ class LoopFusionAdapter {
 
   /// true after initialize() set up the configured verifier (not the fallback).
   bool verifying() const;
-  /// Verdicts published so far.
+  /// Verdicts published so far (deferred and later ones included).
   size_t verdictCount() const;
+  /// Candidates held now (deferred, not yet released or dropped).
+  size_t heldCount() const;
 
  private:
   struct Impl;

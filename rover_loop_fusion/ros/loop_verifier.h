@@ -17,11 +17,14 @@ namespace rover_loop_fusion {
 /// trajectory prior to test it against, and it is the loop that moves a whole session.
 /// Set on the host (~relocalisation), never in the verifier's YAML.
 enum class Relocalisation {
-  kReject,            ///< reject it (default, fail closed): the sessions stay apart
+  /// Hold it (a deferred verdict) until confirm_count candidates between the same two
+  /// sequences agree with each other, then release them together (default): one look-alike
+  /// cannot move a session, a true relocalisation still gets in.
+  kConfirm,
+  kReject,            ///< reject it (fail closed): the sessions stay apart
   kAcceptUnverified,  ///< use it unverified, as upstream loop_fusion does
-  // Planned: confirm it with k mutually consistent candidates (with deferred loops).
 };
-const char* toString(Relocalisation policy);  ///< "reject", "accept_unverified"
+const char* toString(Relocalisation policy);  ///< "confirm", "reject", "accept_unverified"
 bool parseRelocalisation(const std::string& text, Relocalisation* policy);
 
 /// What the host process tells a verifier about itself.
@@ -33,7 +36,7 @@ struct HostInfo {
   /// shifts them itself.
   bool shifts_sequences = true;
   /// The host's ~relocalisation policy.
-  Relocalisation relocalisation = Relocalisation::kReject;
+  Relocalisation relocalisation = Relocalisation::kConfirm;
 };
 
 class LoopVerifier {
@@ -53,9 +56,19 @@ class LoopVerifier {
 
   virtual core::Status addKeyframe(int64_t index, double stamp, int sequence,
                                    const Eigen::Vector3d& t, const Eigen::Quaterniond& q) = 0;
+  /// May hold a candidate (a deferred verdict: reason kDeferred, not accepted); the host then
+  /// learns from takeDecisions() what became of it.
   virtual core::Verdict verify(const core::LoopCandidate& candidate) = 0;
   virtual core::Status commit(const core::LoopCandidate& candidate) = 0;
-  /// The verifier's current trajectory estimate; empty if it keeps none.
+  /// Decisions made since the last call, oldest first (the protocol of core/verifier.h): a
+  /// held candidate released (accepted and already committed by the verifier) or dropped, an
+  /// accepted loop revoked. The host calls it after every addKeyframe() and verify().
+  /// Default: a verifier that never holds or revokes.
+  virtual std::vector<core::LoopDecision> takeDecisions() { return {}; }
+  /// The current estimate of one keyframe; false if unknown or if the verifier keeps none.
+  virtual bool estimate(int64_t /*index*/, core::Pose* /*pose*/) const { return false; }
+  /// The verifier's current trajectory estimate; empty if it keeps none. Copies every
+  /// keyframe: not for the per-candidate path (estimate() is).
   virtual std::vector<core::TrajectoryPoint> trajectory() const { return {}; }
 
   const std::string& name() const { return name_; }

@@ -30,6 +30,8 @@ class TrajectoryPriorVerifier : public LoopVerifier {
     return v;
   }
   core::Status commit(const core::LoopCandidate& c) override { return verifier_->commit(c); }
+  std::vector<core::LoopDecision> takeDecisions() override { return verifier_->takeDecisions(); }
+  bool estimate(int64_t index, core::Pose* pose) const override { return verifier_->estimate(index, pose); }
   std::vector<core::TrajectoryPoint> trajectory() const override { return verifier_->trajectory(); }
 
  protected:
@@ -47,11 +49,12 @@ class TrajectoryPriorVerifier : public LoopVerifier {
     for (const std::string& key : hostDerivedVerifierParameters())
       if (privateNodeHandle().hasParam(key))
         ROS_ERROR("[rover] parameter %s is ignored: the host sets it (anchor_incoming_keyframes: false under "
-                  "loop_fusion, which shifts sessions itself, true in rover_verifier_node; accept_without_prior: "
-                  "from the host's ~relocalisation). Remove it from the YAML.",
+                  "loop_fusion, which shifts sessions itself, true in rover_verifier_node; accept_without_prior, "
+                  "confirm_without_prior: from the host's ~relocalisation). Remove it from the YAML.",
                   privateNodeHandle().resolveName(key).c_str());
     load.config.anchor_incoming_keyframes = !host().shifts_sequences;
     load.config.accept_without_prior = host().relocalisation == Relocalisation::kAcceptUnverified;
+    load.config.confirm_without_prior = host().relocalisation == Relocalisation::kConfirm;
     verifier_.reset(new core::Verifier(load.config));
     ROS_INFO("[rover] %s: trajectory-prior verifier, decision parameters: %s", privateNodeHandle().getNamespace().c_str(),
              core::describe(verifier_->config()).c_str());

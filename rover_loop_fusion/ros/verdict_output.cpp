@@ -11,15 +11,6 @@
 
 namespace rover_loop_fusion {
 
-bool findTrajectoryPosition(const std::vector<core::TrajectoryPoint>& trajectory, int64_t index,
-                            Eigen::Vector3d* position) {
-  auto it = std::lower_bound(trajectory.begin(), trajectory.end(), index,
-                             [](const core::TrajectoryPoint& p, int64_t i) { return p.index < i; });
-  if (it == trajectory.end() || it->index != index) return false;
-  *position = it->estimate.t;
-  return true;
-}
-
 bool VerdictOutput::initialize(ros::NodeHandle& nh, const Options& options, std::string* error) {
   options_ = options;
   const uint32_t queue = static_cast<uint32_t>(std::max(1, options_.queue_size));
@@ -35,26 +26,62 @@ bool VerdictOutput::initialize(ros::NodeHandle& nh, const Options& options, std:
   return true;
 }
 
+namespace {
+
+/// The namespace of a loop's line marker (its text: + "_score").
+const char* markerNamespace(const core::Verdict& v) {
+  if (v.accepted) return "accepted_loops";
+  if (v.deferred) return "held_loops";
+  if (v.reason == core::Reason::kRevoked) return "revoked_loops";
+  return "rejected_loops";
+}
+
+}  // namespace
+
 LoopVerdict VerdictOutput::publish(const core::Verdict& verdict, const VerdictContext& ctx) {
   const LoopVerdict m = toVerdictMsg(verdict, ctx, options_.frame_id);
   if (log_.isOpen())
-    log_.append(core::verdictCsvRow(verdict, ctx.query_stamp, ctx.match_stamp, ctx.inliers, ctx.verifier));
+    log_.append(core::verdictCsvRow(verdict, ctx.query_stamp, ctx.match_stamp, ctx.inliers, ctx.verifier,
+                                    ctx.decision));
   ++count_;
   verdict_pub_.publish(m);
   if (options_.markers && ctx.have_positions) {
+    // A held loop is drawn amber; its final verdict replaces that marker (green: released, red:
+    // dropped), and a revocation turns an accepted loop's green marker red: one marker per
+    // candidate, under the namespace of its state.
+    const std::pair<int64_t, int64_t> key(verdict.query_index, verdict.match_index);
+    const std::string ns = markerNamespace(verdict);
+    int id = static_cast<int>(count_);
     visualization_msgs::MarkerArray arr;
+    auto shown = shown_.find(key);
+    if (shown != shown_.end()) {
+      id = shown->second.id;
+      if (shown->second.ns != ns)
+        for (const std::string& gone : {shown->second.ns, shown->second.ns + "_score"}) {
+          visualization_msgs::Marker del;
+          del.header.frame_id = options_.frame_id;
+          del.header.stamp = m.header.stamp;
+          del.ns = gone;
+          del.id = id;
+          del.action = visualization_msgs::Marker::DELETE;
+          arr.markers.push_back(del);
+        }
+      shown_.erase(shown);
+    }
+    // Only a held or accepted loop can change colour later.
+    if (verdict.deferred || verdict.accepted) shown_[key] = Shown{id, ns};
     visualization_msgs::Marker line;
     line.header.frame_id = options_.frame_id;
     line.header.stamp = m.header.stamp;
-    line.ns = verdict.accepted ? "accepted_loops" : "rejected_loops";
-    line.id = static_cast<int>(count_);
+    line.ns = ns;
+    line.id = id;
     line.type = visualization_msgs::Marker::LINE_LIST;
     line.action = visualization_msgs::Marker::ADD;
     line.pose.orientation.w = 1.0;
     line.scale.x = 0.05;
     line.color.a = 1.0;
-    line.color.r = verdict.accepted ? 0.1f : 0.9f;
-    line.color.g = verdict.accepted ? 0.8f : 0.1f;
+    line.color.r = verdict.accepted ? 0.1f : verdict.deferred ? 1.0f : 0.9f;
+    line.color.g = verdict.accepted ? 0.8f : verdict.deferred ? 0.7f : 0.1f;
     line.color.b = 0.1f;
     line.points.push_back(toPoint(ctx.query_position));
     line.points.push_back(toPoint(ctx.match_position));
@@ -69,6 +96,7 @@ LoopVerdict VerdictOutput::publish(const core::Verdict& verdict, const VerdictCo
     label << m.query_index << "->" << m.match_index << " ";
     if (std::isfinite(m.score)) label << std::fixed << std::setprecision(2) << m.score << " m";
     else label << m.reason;
+    if (m.decision != LoopVerdict::VERIFY || verdict.deferred) label << " (" << (verdict.deferred ? "held" : m.decision) << ")";
     text.text = label.str();
     arr.markers.push_back(line);
     arr.markers.push_back(text);

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "rover_loop_fusion/LoopVerdict.h"
-#include "rover_loop_fusion/core/verifier.h"
+#include "rover_loop_fusion/core/types.h"
 #include "rover_loop_fusion/ros/conversions.h"
 #include "rover_loop_fusion/ros/verdict_log.h"
 
@@ -12,15 +12,12 @@
 #include <ros/node_handle.h>
 #include <ros/publisher.h>
 
+#include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace rover_loop_fusion {
-
-/// The estimated position of keyframe `index` in a trajectory ordered by index (as
-/// LoopVerifier::trajectory() returns it); false if the trajectory does not have it.
-bool findTrajectoryPosition(const std::vector<core::TrajectoryPoint>& trajectory, int64_t index,
-                            Eigen::Vector3d* position);
 
 class VerdictOutput {
  public:
@@ -43,8 +40,11 @@ class VerdictOutput {
   /// cannot be opened.
   bool initialize(ros::NodeHandle& nh, const Options& options, std::string* error);
 
-  /// Publishes, draws and logs one verdict; returns the message. Throws only what roscpp's
-  /// publish throws (the callers guard it).
+  /// Publishes, draws and logs one verdict; returns the message. Markers: one per candidate,
+  /// green accepted, red rejected, amber held (deferred); the final verdict of a held
+  /// candidate and the revocation of an accepted loop replace its marker (ns held_loops ->
+  /// accepted_loops / rejected_loops, accepted_loops -> revoked_loops). Throws only what
+  /// roscpp's publish throws (the callers guard it).
   LoopVerdict publish(const core::Verdict& verdict, const VerdictContext& ctx);
 
   size_t published() const { return count_; }
@@ -56,6 +56,12 @@ class VerdictOutput {
   ros::Publisher marker_pub_;
   VerdictLog log_;
   size_t count_ = 0;
+  /// Markers that may change colour later (held and accepted loops), by (query, match).
+  struct Shown {
+    int id;
+    std::string ns;
+  };
+  std::map<std::pair<int64_t, int64_t>, Shown> shown_;
 };
 
 }  // namespace rover_loop_fusion

@@ -19,11 +19,17 @@ const char kTrajectoryPriorVerifierType[] = "rover_loop_fusion/TrajectoryPriorVe
 const char kAcceptAllVerifierType[] = "rover_loop_fusion/AcceptAllVerifier";
 
 const char* toString(Relocalisation policy) {
-  return policy == Relocalisation::kAcceptUnverified ? "accept_unverified" : "reject";
+  switch (policy) {
+    case Relocalisation::kConfirm: return "confirm";
+    case Relocalisation::kAcceptUnverified: return "accept_unverified";
+    case Relocalisation::kReject: return "reject";
+  }
+  return "reject";
 }
 
 bool parseRelocalisation(const std::string& text, Relocalisation* policy) {
-  if (text == "reject") *policy = Relocalisation::kReject;
+  if (text == "confirm") *policy = Relocalisation::kConfirm;
+  else if (text == "reject") *policy = Relocalisation::kReject;
   else if (text == "accept_unverified") *policy = Relocalisation::kAcceptUnverified;
   else return false;
   return true;
@@ -86,6 +92,17 @@ VerifierPtr loadVerifierPlugin(const std::string& type_or_alias, const std::stri
 bool validVerifierName(const std::string& name) {
   std::string why;
   return !name.empty() && ros::names::validate(name, why) && name.find('/') == std::string::npos && name[0] != '~';
+}
+
+const char* relocalisationText(Relocalisation policy) {
+  switch (policy) {
+    case Relocalisation::kConfirm:
+      return "loops between unconnected sequences, e.g. into a loaded map, are held until confirm_count of them agree";
+    case Relocalisation::kAcceptUnverified:
+      return "a first loop between unconnected sequences, e.g. into a loaded map, is USED UNVERIFIED";
+    case Relocalisation::kReject: break;
+  }
+  return "a first loop between unconnected sequences, e.g. into a loaded map, is rejected";
 }
 
 template <typename T>
@@ -194,7 +211,7 @@ VerifierHost::Start VerifierHost::start(const HostInfo& info, int verdict_queue,
   std::string policy = toString(p.relocalisation);
   r.text("relocalisation", &policy);
   if (!parseRelocalisation(policy, &p.relocalisation))
-    r.error("relocalisation", "must be reject or accept_unverified (got '" + policy + "')");
+    r.error("relocalisation", "must be confirm, reject or accept_unverified (got '" + policy + "')");
   if (!validVerifierName(p.verifier_name))
     r.error("verifier_name", "must be a plain name such as rover (got '" + p.verifier_name + "')");
   for (const std::string& w : r.unknownKeys({p.verifier_name})) ROS_WARN("[rover] %s", w.c_str());
@@ -238,10 +255,7 @@ VerifierHost::Start VerifierHost::start(const HostInfo& info, int verdict_queue,
   ROS_INFO("[rover] %s verifies loop candidates with %s (parameters in %s/); relocalisation: %s (%s); "
            "verdicts on %s%s%s",
            ros::this_node::getName().c_str(), type_.c_str(), resolve(p.verifier_name).c_str(),
-           toString(p.relocalisation),
-           p.relocalisation == Relocalisation::kReject
-               ? "a first loop between unconnected sequences, e.g. into a loaded map, is rejected"
-               : "a first loop between unconnected sequences, e.g. into a loaded map, is USED UNVERIFIED",
+           toString(p.relocalisation), relocalisationText(p.relocalisation),
            resolve("loop_verdicts").c_str(), p.verdict_log.empty() ? "" : ", verdict log ", p.verdict_log.c_str());
   return out;
 }
@@ -265,22 +279,38 @@ core::Verdict VerifierHost::decide(const core::LoopCandidate& c) noexcept {
   return v;
 }
 
+std::vector<core::LoopDecision> VerifierHost::takeDecisions() noexcept {
+  std::vector<core::LoopDecision> out;
+  if (verifier_) guarded("verifier " + type_ + ": takeDecisions (decisions lost)", [&] { out = verifier_->takeDecisions(); });
+  return out;
+}
+
 bool VerifierHost::publish(const core::Verdict& v, VerdictContext ctx, const std::string& what,
                            const PositionLookup& fallback) noexcept {
   if (!what.empty()) guarded("logging a verdict", [&] {
-    if (v.accepted) ROS_INFO("[rover] %s accepted: %s", what.c_str(), v.detail.c_str());
+    const bool later = ctx.decision != "verify";
+    const std::string how = later ? " (" + ctx.decision + " of a held candidate)" : std::string();
+    if (v.accepted) ROS_INFO("[rover] %s accepted%s: %s", what.c_str(), how.c_str(), v.detail.c_str());
+    else if (v.deferred) ROS_INFO("[rover] %s HELD (deferred): %s", what.c_str(), v.detail.c_str());
     else if (v.reason == core::Reason::kInvalidInput)
       ROS_WARN("[rover] %s REJECTED (invalid_input): %s", what.c_str(), v.detail.c_str());
-    else ROS_INFO("[rover] %s REJECTED (%s): %s", what.c_str(), core::toString(v.reason), v.detail.c_str());
+    else if (v.reason == core::Reason::kRevoked)
+      ROS_WARN("[rover] %s REVOKED: %s", what.c_str(), v.detail.c_str());
+    else ROS_INFO("[rover] %s REJECTED (%s)%s: %s", what.c_str(), core::toString(v.reason), how.c_str(),
+                  v.detail.c_str());
   });
   if (!output_ready_) return false;
   if (params_.publish_markers)
     guarded("marker positions for " + what, [&] {
-      // At the verifier's estimate (an accepted loop's ends meet), else where the host has them.
-      std::vector<core::TrajectoryPoint> trajectory;
-      if (verifier_) trajectory = verifier_->trajectory();
+      // At the verifier's estimate of the two keyframes (an accepted loop's ends meet), else
+      // where the host has them. Two look-ups, never a copy of the trajectory.
       auto find = [&](int64_t index, Eigen::Vector3d* position) {
-        return findTrajectoryPosition(trajectory, index, position) || (fallback && fallback(index, position));
+        core::Pose pose;
+        if (verifier_ && verifier_->estimate(index, &pose)) {
+          *position = pose.t;
+          return true;
+        }
+        return fallback && fallback(index, position);
       };
       ctx.have_positions = find(v.query_index, &ctx.query_position) && find(v.match_index, &ctx.match_position);
     });

@@ -38,8 +38,8 @@ extern const char kAcceptAllVerifierType[];        ///< "rover_loop_fusion/Accep
 std::string resolveVerifierType(const std::string& type_or_alias);
 
 /// Verifier parameters the host sets (HostInfo), never a YAML: anchor_incoming_keyframes
-/// (from shifts_sequences: a wrong value shifts sessions twice or not at all) and
-/// accept_without_prior (from ~relocalisation).
+/// (from shifts_sequences: a wrong value shifts sessions twice or not at all),
+/// accept_without_prior and confirm_without_prior (from ~relocalisation).
 const std::vector<std::string>& hostDerivedVerifierParameters();
 
 /// An invalid_input rejection of c that says why.
@@ -98,7 +98,7 @@ struct HostParams {
   std::string verdict_log;  ///< CSV file every verdict is appended to; empty: off
   bool publish_markers = true;
   std::string frame_id = "world";
-  Relocalisation relocalisation = Relocalisation::kReject;
+  Relocalisation relocalisation = Relocalisation::kConfirm;
 };
 
 class VerifierHost {
@@ -134,13 +134,20 @@ class VerifierHost {
   std::string resolve(const std::string& key) const { return nh_.resolveName(key); }
 
   /// One decision: verify(c) and, if accepted, commit(c). A refused commit or anything the
-  /// plugin throws gives an invalid_input rejection (logged). Needs a running verifier.
+  /// plugin throws gives an invalid_input rejection (logged). A deferred verdict (held) is
+  /// passed on: takeDecisions() later says what became of the candidate. Needs a running
+  /// verifier.
   core::Verdict decide(const core::LoopCandidate& c) noexcept;
 
-  /// Logs v (INFO; WARN for invalid_input) as "<what> accepted/REJECTED ..." (not if `what`
-  /// is empty: the caller sums such verdicts up) and publishes it
-  /// with a marker at the verifier's estimate (else at `fallback`). A failure to draw the
-  /// marker leaves it out; false if the verdict could not be published (logged). Never throws.
+  /// The plugin's decisions since the last call (LoopVerifier::takeDecisions); empty if it
+  /// threw (logged) or no verifier runs. Call after every addKeyframe() and decide().
+  std::vector<core::LoopDecision> takeDecisions() noexcept;
+
+  /// Logs v (INFO; WARN for invalid_input and revoked) as "<what> accepted/HELD/REJECTED/
+  /// REVOKED ..." (not if `what` is empty: the caller sums such verdicts up) and publishes it
+  /// (ctx.decision: verify, or the later release/drop/revoke) with a marker at the verifier's
+  /// estimate of the two keyframes (else at `fallback`). A failure to draw the marker leaves
+  /// it out; false if the verdict could not be published (logged). Never throws.
   bool publish(const core::Verdict& v, VerdictContext ctx, const std::string& what,
                const PositionLookup& fallback = PositionLookup()) noexcept;
 

@@ -163,6 +163,18 @@ void VerifierNode::finish() {
     for (uint64_t id : waiting_.ids())
       reject(waiting_.take(id), -1, -1, "not verified: the node was shut down while the candidate waited for its "
              "keyframes", false);
+    // Held candidates get their final verdict too: what the last message decided, then a drop
+    // for what nothing confirmed before the end.
+    applyDecisions();
+    const size_t held = held_.size();
+    for (const auto& h : held_) {
+      core::LoopCandidate c;
+      c.query_index = h.first.first;
+      c.match_index = h.first.second;
+      publishVerdict(core::Verdict::Reject(core::Reason::kUnconfirmed, c, "still held when the node was shut down"),
+                     h.second, false, "drop");
+    }
+    held_.clear();
     for (const Incoming& item : inbox) {
       if (item.keyframe) {
         ++unprocessed_keyframes;
@@ -176,12 +188,12 @@ void VerifierNode::finish() {
       ROS_ERROR("[rover] %zu messages were dropped because the inbox was full (queue_size=%d)", inbox_dropped_,
                 params_.queue_size);
     ROS_INFO("[rover] %s shutting down: %zu verdicts published; %zu candidates not verified (%zu waiting for "
-             "keyframes, %zu not processed) got an invalid_input verdict saying so; %zu keyframe messages not "
-             "processed",
+             "keyframes, %zu not processed) got an invalid_input verdict saying so; %zu held candidates not "
+             "confirmed got an unconfirmed verdict; %zu keyframe messages not processed",
              ros::this_node::getName().c_str(), host_.output().published(), waiting + unprocessed_candidates,
-             waiting, unprocessed_candidates, unprocessed_keyframes);
+             waiting, unprocessed_candidates, held, unprocessed_keyframes);
     // roscpp sends on its own threads and has no flush: give the last verdicts time to leave.
-    if (waiting + unprocessed_candidates > 0) ros::WallDuration(0.5).sleep();
+    if (waiting + unprocessed_candidates + held > 0) ros::WallDuration(0.5).sleep();
   });
 }
 
@@ -294,7 +306,7 @@ void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg, int64_t index) {
     ROS_WARN("[rover] verifier, keyframe %ld: %s", static_cast<long>(index), added.message.c_str());
   if (!added.ok)
     refused_warning_.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + added.message +
-                          "); loops that involve it are rejected");
+                          "); loops that involve it are rejected");  applyDecisions();
 }
 
 void VerifierNode::refuseKeyframe(int64_t index, int64_t ns, const std::string& why) {
@@ -412,21 +424,72 @@ void VerifierNode::expire() {
 // ---- verdicts --------------------------------------------------------------------------------
 
 void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match) {
-  core::Verdict v = host_.decide(fromCandidateMsg(msg, query, match));
-  if (v.accepted) {
-    // The core's API reports refusals as a Status; it does not throw.
-    const core::Status g = graph_->addLoop(fromCandidateMsg(msg, query, match));
-    if (g.ok) {
-      changed_ = true;
-    } else {
-      v.accepted = false;
-      v.reason = core::Reason::kInvalidInput;
-      v.detail += "; but the node's pose graph refused it: " + g.message;
-    }
-  }
+  const core::LoopCandidate c = fromCandidateMsg(msg, query, match);
+  core::Verdict v = host_.decide(c);
+  if (v.accepted) useLoop(c, &v);
   v.query_index = query;
   v.match_index = match;
+  const std::pair<int64_t, int64_t> key(query, match);
+  if (v.deferred) held_[key] = msg;
+  if (v.accepted) loop_inliers_[key] = msg.inliers;
   publishVerdict(v, msg);
+  applyDecisions();
+}
+
+void VerifierNode::useLoop(const core::LoopCandidate& c, core::Verdict* v) {
+  // The core's API reports refusals as a Status; it does not throw.
+  const core::Status g = graph_->addLoop(c);
+  if (g.ok) {
+    changed_ = true;
+    return;
+  }
+  v->accepted = false;
+  v->reason = core::Reason::kInvalidInput;
+  v->detail += "; but the node's pose graph refused it: " + g.message;
+}
+
+void VerifierNode::applyDecisions() {
+  for (const core::LoopDecision& d : host_.takeDecisions()) {
+    const core::LoopCandidate& c = d.candidate;
+    const std::pair<int64_t, int64_t> key(c.query_index, c.match_index);
+    core::Verdict v = d.verdict;
+    v.query_index = c.query_index;
+    v.match_index = c.match_index;
+    v.deferred = false;
+    // What the candidate message said (inliers, stamps): kept for held candidates and loops.
+    LoopCandidate msg;
+    msg.query_index = c.query_index;
+    msg.match_index = c.match_index;
+    msg.inliers = c.inliers;
+    auto held = held_.find(key);
+    if (held != held_.end()) {
+      msg = held->second;
+      held_.erase(held);
+    }
+    switch (d.kind) {
+      case core::LoopDecision::Kind::kRelease:
+        useLoop(c, &v);
+        if (v.accepted) loop_inliers_[key] = msg.inliers;
+        break;
+      case core::LoopDecision::Kind::kRevoke: {
+        auto loop = loop_inliers_.find(key);
+        if (loop != loop_inliers_.end()) {
+          msg.inliers = loop->second;
+          loop_inliers_.erase(loop);
+        }
+        // The node's stand-in of loop_fusion's graph drops it too (loop_fusion: has_loop = false).
+        const core::Status g = graph_->removeLoop(c.query_index, c.match_index);
+        if (g.ok) changed_ = true;
+        else
+          ROS_WARN("[rover] revoked loop %ld -> %ld: not in the node's pose graph (%s)",
+                   static_cast<long>(c.query_index), static_cast<long>(c.match_index), g.message.c_str());
+        break;
+      }
+      case core::LoopDecision::Kind::kDrop:
+        break;
+    }
+    publishVerdict(v, msg, true, core::toString(d.kind));
+  }
 }
 
 void VerifierNode::reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why, bool log) {
@@ -436,8 +499,10 @@ void VerifierNode::reject(const LoopCandidate& msg, int64_t query, int64_t match
   publishVerdict(rejection(c, why), msg, log);
 }
 
-void VerifierNode::publishVerdict(const core::Verdict& v, const LoopCandidate& msg, bool log) {
+void VerifierNode::publishVerdict(const core::Verdict& v, const LoopCandidate& msg, bool log,
+                                  const char* decision) {
   VerdictContext ctx;
+  ctx.decision = decision;
   ctx.inliers = msg.inliers;
   ctx.verifier = host_.verifierType();
   auto q = stamp_of_.find(v.query_index), m = stamp_of_.find(v.match_index);

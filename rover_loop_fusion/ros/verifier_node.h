@@ -29,9 +29,15 @@
 // the input rate (a bag played at 200x) therefore never makes roscpp drop keyframe messages;
 // if the inbox is full, the message is dropped with a ROS_ERROR (counted).
 //
+// Held candidates: a candidate the verifier holds gets a deferred verdict (final: false) and,
+// when the verifier decides (after a later keyframe or candidate), its final one: released
+// (accepted; the loop enters the node's pose graph) or dropped (unconfirmed). A revoked loop
+// leaves the pose graph with a revoked verdict. See msg/LoopVerdict.msg.
+//
 // Shutdown (SIGINT, SIGTERM): the node finishes the verification under way, stops taking
 // messages, gives every candidate it has not decided a verdict ("not verified: the node was
-// shut down"), publishes and logs them, says what it left undone, then exits.
+// shut down"; a held one: unconfirmed, "still held when the node was shut down"), publishes and
+// logs them, says what it left undone, then exits.
 //
 // Master watchdog: the node checks the ROS master every second; if it restarted (new
 // /run_id), the node's registrations are gone, so it exits with status 2 and a ROS_FATAL
@@ -134,8 +140,15 @@ class VerifierNode {
   Resolution resolve(int64_t index, const ros::Time& stamp, const char* role, int64_t* found,
                      std::string* why) const;
   void verify(const LoopCandidate& msg, int64_t query, int64_t match);
+  /// Adds an accepted or released loop to the node's pose graph; a refusal turns *v into an
+  /// invalid_input rejection.
+  void useLoop(const core::LoopCandidate& c, core::Verdict* v);
+  /// The verifier's later decisions (after every keyframe and verification): a release adds
+  /// the loop to the node's pose graph, a revocation removes it; each gets its verdict.
+  void applyDecisions();
   void reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why, bool log = true);
-  void publishVerdict(const core::Verdict& v, const LoopCandidate& msg, bool log = true);
+  void publishVerdict(const core::Verdict& v, const LoopCandidate& msg, bool log = true,
+                      const char* decision = "verify");
   /// Runs loop_fusion's optimisation on the graph and publishes the paths (into *out too).
   void optimizeAndPublish(Optimize::Response* out);
 
@@ -178,6 +191,10 @@ class VerifierNode {
 
   // Candidates waiting for their keyframes (received: when the node took them from the inbox).
   WaitingCandidates<LoopCandidate> waiting_;
+  // Candidates the verifier holds (deferred verdict published, final one to come), by (query,
+  // match), as received; and the inlier counts of the loops in use (for a revocation's verdict).
+  std::map<std::pair<int64_t, int64_t>, LoopCandidate> held_;
+  std::map<std::pair<int64_t, int64_t>, int> loop_inliers_;
 
   bool changed_ = false;  // keyframes or loops since the last optimisation
   size_t keyframes_refused_ = 0;

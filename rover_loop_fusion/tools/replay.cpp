@@ -173,6 +173,7 @@ int main(int argc, char** argv) {
     int label = -1;
     double query_stamp = 0.0, match_stamp = 0.0;
     int inliers = -1;
+    const char* decision = "verify";  // or the later decision: release, drop, revoke
   };
   std::vector<Row> rows;
   std::map<std::pair<int64_t, int64_t>, size_t> open_rows;  // deferred or accepted, by (query, match)
@@ -187,6 +188,7 @@ int main(int argc, char** argv) {
       v.deferred = false;
       v.reason = d.verdict.reason;
       v.detail = std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + v.detail + ")";
+      rows[it->second].decision = core::toString(d.kind);
       if (!v.accepted) open_rows.erase(it);
       if (!quiet)
         std::printf("%7lld -> %7lld  label %2d  %-8s %s\n", static_cast<long long>(d.candidate.query_index),
@@ -259,11 +261,13 @@ int main(int argc, char** argv) {
     r.verdict.deferred = false;
     r.verdict.reason = core::Reason::kUnconfirmed;
     r.verdict.detail = "still held when the run ended (" + r.verdict.detail + ")";
+    r.decision = "drop";
   }
   for (const Row& r : rows) {
     if (r.label == 1) (r.verdict.accepted ? tp : fn)++;
     if (r.label == 0) (r.verdict.accepted ? fp : tn)++;
-    std::fprintf(csv, "%s\n", core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay").c_str());
+    std::fprintf(csv, "%s\n", core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay",
+                                                            r.decision).c_str());
   }
   // Snapshots still due (the last keyframes were refused).
   for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);

@@ -15,5 +15,8 @@ void patchCalls(rover_loop_fusion::LoopFusionAdapter& rover, bool use_imu) {
   rover.addKeyframe(index, time_stamp, sequence, P, R);
   if (has_loop && !rover.verifyLoop(index, loop_index, loop_info)) has_loop = false;
   rover.commitStoredLoop(index, loop_index, loop_info);
+  int loop_inliers = -1;
+  for (const rover_loop_fusion::LoopFusionAdapter::LaterLoop& later : rover.takeLaterLoops())
+    later.apply(has_loop, loop_index, loop_info, loop_inliers);
   (void)has_loop;
 }

@@ -31,6 +31,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <set>
@@ -134,38 +135,58 @@ class FakePoseGraph {
       cur_kf.loop_index = old_kf.index;
       cur_kf.loop_info = detection->loop_info;
       cur_kf.loop_inliers = detection->inliers;
-      // patch: the hook after findConnection
+      // patch: the hook after findConnection; an accepted loop is used at once (useLoop)
       if (rover.verifyKeyframeLoop(cur_kf.index, cur_kf.loop_inliers, cur_kf.has_loop, cur_kf.loop_index,
-                                   cur_kf.loop_info)) {
-        if (earliest_loop_index > loop_index || earliest_loop_index == -1) earliest_loop_index = loop_index;
-        const Eigen::Vector3d w_P_old = old_kf.vio_T_w_i;
-        const Eigen::Matrix3d w_R_old = old_kf.vio_R_w_i;
-        const Eigen::Vector3d relative_t = cur_kf.loop_info.head<3>();
-        const Eigen::Matrix3d relative_q =
-            Eigen::Quaterniond(cur_kf.loop_info(3), cur_kf.loop_info(4), cur_kf.loop_info(5), cur_kf.loop_info(6))
-                .toRotationMatrix();
-        const Eigen::Vector3d w_P_cur = w_R_old * relative_t + w_P_old;
-        const Eigen::Matrix3d w_R_cur = w_R_old * relative_q;
-        Eigen::Matrix3d shift_r;
-        if (use_imu) shift_r = yawR(yawDeg(w_R_cur) - yawDeg(vio_R_cur));
-        else shift_r = w_R_cur * vio_R_cur.transpose();
-        const Eigen::Vector3d shift_t = w_P_cur - w_R_cur * vio_R_cur.transpose() * vio_P_cur;
-        if (old_kf.sequence != cur_kf.sequence && sequence_loop[cur_kf.sequence] == 0) {
-          w_r_vio = shift_r;
-          w_t_vio = shift_t;
-          cur_kf.vio_T_w_i = w_r_vio * vio_P_cur + w_t_vio;
-          cur_kf.vio_R_w_i = w_r_vio * vio_R_cur;
-          for (auto& kf : keyframelist) {
-            if (kf.second.sequence != cur_kf.sequence) continue;
-            kf.second.vio_T_w_i = w_r_vio * kf.second.vio_T_w_i + w_t_vio;
-            kf.second.vio_R_w_i = w_r_vio * kf.second.vio_R_w_i;
-          }
-          sequence_loop[cur_kf.sequence] = 1;
-        }
-        optimize_buf.push_back(cur_kf.index);
-      }
+                                   cur_kf.loop_info))
+        useLoop(cur_kf, old_kf);
     }
-    return keyframelist[cur_kf.index] = cur_kf;
+    FakeKeyFrame& stored = keyframelist[cur_kf.index] = cur_kf;
+    // patch: loops decided after their keyframe's verdict (keyframelist holds cur_kf now)
+    for (const LoopFusionAdapter::LaterLoop& later : rover.takeLaterLoops()) {
+      auto kf = keyframelist.find(later.index);
+      auto old_kf = keyframelist.find(later.match_index);
+      if (kf == keyframelist.end() || old_kf == keyframelist.end()) continue;
+      later.apply(kf->second.has_loop, kf->second.loop_index, kf->second.loop_info, kf->second.loop_inliers);
+      if (later.use) useLoop(kf->second, old_kf->second);
+      optimize_buf.push_back(stored.index);
+    }
+    return stored;
+  }
+
+  /// Patch: PoseGraph::useLoop, what addKeyFrame does with a loop it uses (moved out of
+  /// addKeyFrame), for the loop found at cur_kf and for a held loop released later (cur_kf may
+  /// then be in keyframelist already, and of an older sequence).
+  void useLoop(FakeKeyFrame& cur_kf, const FakeKeyFrame& old_kf) {
+    if (earliest_loop_index > old_kf.index || earliest_loop_index == -1) earliest_loop_index = old_kf.index;
+    const Eigen::Vector3d w_P_old = old_kf.vio_T_w_i;
+    const Eigen::Matrix3d w_R_old = old_kf.vio_R_w_i;
+    const Eigen::Vector3d vio_P_cur = cur_kf.vio_T_w_i;
+    const Eigen::Matrix3d vio_R_cur = cur_kf.vio_R_w_i;
+    const Eigen::Vector3d relative_t = cur_kf.loop_info.head<3>();
+    const Eigen::Matrix3d relative_q =
+        Eigen::Quaterniond(cur_kf.loop_info(3), cur_kf.loop_info(4), cur_kf.loop_info(5), cur_kf.loop_info(6))
+            .toRotationMatrix();
+    const Eigen::Vector3d w_P_cur = w_R_old * relative_t + w_P_old;
+    const Eigen::Matrix3d w_R_cur = w_R_old * relative_q;
+    Eigen::Matrix3d shift_r;
+    if (use_imu) shift_r = yawR(yawDeg(w_R_cur) - yawDeg(vio_R_cur));
+    else shift_r = w_R_cur * vio_R_cur.transpose();
+    const Eigen::Vector3d shift_t = w_P_cur - w_R_cur * vio_R_cur.transpose() * vio_P_cur;
+    if (old_kf.sequence != cur_kf.sequence && sequence_loop[cur_kf.sequence] == 0) {
+      if (cur_kf.sequence == sequence_cnt) {
+        w_r_vio = shift_r;
+        w_t_vio = shift_t;
+      }
+      cur_kf.vio_T_w_i = shift_r * vio_P_cur + shift_t;
+      cur_kf.vio_R_w_i = shift_r * vio_R_cur;
+      for (auto& kf : keyframelist) {
+        if (kf.second.sequence != cur_kf.sequence || &kf.second == &cur_kf) continue;
+        kf.second.vio_T_w_i = shift_r * kf.second.vio_T_w_i + shift_t;
+        kf.second.vio_R_w_i = shift_r * kf.second.vio_R_w_i;
+      }
+      sequence_loop[cur_kf.sequence] = 1;
+    }
+    optimize_buf.push_back(cur_kf.index);
   }
 
   /// PoseGraph::loadKeyFrame as loadPoseGraph calls it (flag_detect_loop = 0): keyframes of
@@ -542,18 +563,22 @@ TEST_F(Adapter, SixDofPoseGraphWithoutImu) {
 
 namespace {
 
-/// loadPoseGraph: laps 1-2 of a corridor are a saved graph (sequence 0, with its stored
-/// loops); lap 3 is a new session (sequence 1) in its own VIO frame. Returns the keyframes of
-/// the session's first three (true) loops into the map, as stored.
-std::vector<FakeKeyFrame> loadedMapThenNewSession(FakePoseGraph& pg) {
-  const sim::Scene s = corridor(3);
-  const int per_lap = static_cast<int>(s.keyframes.size() / 3);
-  const std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(s);
+/// A corridor of three laps: laps 1-2 a saved pose graph, lap 3 a new session.
+struct MapAndSession {
+  sim::Scene scene = corridor(3);
+  int per_lap = static_cast<int>(scene.keyframes.size() / 3);
+  std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(scene);
+  core::Pose frame;  ///< the session's own VIO frame
+  std::map<int, Detection> detections;  ///< what findConnection found, by query keyframe
+};
+
+/// loadPoseGraph: laps 1-2 of `m` (sequence 0, with their stored true loops).
+void loadMap(FakePoseGraph& pg, MapAndSession& m) {
   int stored = 0;
-  for (int i = 0; i < 2 * per_lap; ++i) {
-    FakeKeyFrame kf = keyframe(s.keyframes[i], 0);
-    auto c = candidates.find(i);
-    if (c != candidates.end() && c->second->is_true) {
+  for (int i = 0; i < 2 * m.per_lap; ++i) {
+    FakeKeyFrame kf = keyframe(m.scene.keyframes[i], 0);
+    auto c = m.candidates.find(i);
+    if (c != m.candidates.end() && c->second->is_true) {
       kf.has_loop = true;
       kf.loop_index = static_cast<int>(c->second->candidate.match_index);
       kf.loop_info = loopInfo(c->second->candidate);
@@ -563,31 +588,50 @@ std::vector<FakeKeyFrame> loadedMapThenNewSession(FakePoseGraph& pg) {
   }
   EXPECT_GT(stored, 2);
   EXPECT_EQ(pg.rover.verdictCount(), 0u);  // stored loops are not verdicts
-
   // The new session starts in its own VIO frame.
   const core::Pose session_frame(Eigen::Vector3d(4.0, -7.0, 0.5),
                                  Eigen::Quaterniond(Eigen::AngleAxisd(0.8, Eigen::Vector3d::UnitZ())));
-  const core::Pose to_session = sim::relative(s.keyframes[2 * per_lap].vio, core::Pose());
-  core::Pose frame = sim::compose(session_frame, to_session);
-  std::vector<FakeKeyFrame> looped;
-  for (int i = 2 * per_lap; i < 3 * per_lap && looped.size() < 3; ++i) {
-    std::unique_ptr<Detection> d;
-    auto c = candidates.find(i);
-    if (c != candidates.end() && c->second->is_true)
-      d.reset(new Detection{static_cast<int>(c->second->candidate.match_index), loopInfo(c->second->candidate)});
-    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(s.keyframes[i], 1, frame), d.get());
-    if (d) looped.push_back(kf);
+  const core::Pose to_session = sim::relative(m.scene.keyframes[2 * m.per_lap].vio, core::Pose());
+  m.frame = sim::compose(session_frame, to_session);
+}
+
+/// addKeyFrame for keyframe i of lap 3 (sequence 1), with its candidate if `use(candidate)`.
+const FakeKeyFrame& sessionKeyFrame(FakePoseGraph& pg, MapAndSession& m, int i,
+                                    const std::function<bool(const sim::SimCandidate&)>& use) {
+  std::unique_ptr<Detection> d;
+  auto c = m.candidates.find(i);
+  if (c != m.candidates.end() && use(*c->second)) {
+    d.reset(new Detection{static_cast<int>(c->second->candidate.match_index), loopInfo(c->second->candidate),
+                          20 + i % 50});
+    m.detections[i] = *d;
   }
-  EXPECT_EQ(looped.size(), 3u);
+  return pg.addKeyFrame(keyframe(m.scene.keyframes[i], 1, m.frame), d.get());
+}
+
+/// loadPoseGraph of laps 1-2, then lap 3 as a new session in its own VIO frame up to its
+/// `loops`-th true loop into the map. Returns the keyframes of those loops as addKeyFrame
+/// stored them.
+std::vector<FakeKeyFrame> loadedMapThenNewSession(FakePoseGraph& pg, size_t loops = 3,
+                                                  MapAndSession* out = nullptr) {
+  MapAndSession local;
+  MapAndSession& m = out ? *out : local;
+  loadMap(pg, m);
+  std::vector<FakeKeyFrame> looped;
+  for (int i = 2 * m.per_lap; i < 3 * m.per_lap && looped.size() < loops; ++i) {
+    const FakeKeyFrame& kf = sessionKeyFrame(pg, m, i, [](const sim::SimCandidate& c) { return c.is_true; });
+    if (m.detections.count(i)) looped.push_back(kf);
+  }
+  EXPECT_EQ(looped.size(), loops);
   return looped;
 }
 
 }  // namespace
 
-TEST_F(Adapter, FirstLoopIntoALoadedMapIsRejectedByDefault) {
-  // ~relocalisation: reject (the default): a loop between sequences that nothing connects has
-  // no trajectory prior to be verified against, and it is the loop that would move the whole
-  // session. It is rejected and dropped; loop_fusion does not shift the session for it.
+TEST_F(Adapter, FirstLoopIntoALoadedMapIsRejectedWithRelocalisationReject) {
+  // ~relocalisation: reject: a loop between sequences that nothing connects has no trajectory
+  // prior to be verified against, and it is the loop that would move the whole session. It is
+  // rejected and dropped; loop_fusion does not shift the session for it.
+  ros::param::set("~relocalisation", "reject");
   FakePoseGraph pg;
   ASSERT_TRUE(pg.setIMUFlag(true));
   Listener listen;
@@ -634,6 +678,389 @@ TEST_F(Adapter, LoadedPoseGraphThenANewSessionWithRelocalisationAcceptUnverified
   EXPECT_EQ(pg.optimize_buf.size(), 3u);
 }
 
+namespace {
+
+/// The keyframe position loop_fusion's first-loop shift puts the query of a loop at: the
+/// match's VIO pose composed with loop_info (useLoop's w_P_cur).
+Eigen::Vector3d placedByLoop(const FakePoseGraph& pg, const FakeKeyFrame& query) {
+  const FakeKeyFrame& match = pg.keyframelist.at(query.loop_index);
+  return match.vio_R_w_i * Eigen::Vector3d(query.loop_info.head<3>()) + match.vio_T_w_i;
+}
+
+}  // namespace
+
+TEST_F(Adapter, FirstLoopsIntoALoadedMapAreHeldUntilConfirmedThenUsed) {
+  // ~relocalisation: confirm (the default). The first loops into a loaded map have no
+  // trajectory prior: each is held (a deferred verdict; dropped from its keyframe, so neither
+  // used nor saved) until confirm_count (3, config/rover_indoor.yaml) of them agree with each
+  // other. Then they are released together and loop_fusion applies them to their keyframes
+  // exactly as findConnection found them: the first shifts the session into the map's frame as
+  // loop_fusion does for a first loop (once), each queues an optimisation. Later loops are
+  // verified against the prior in the shifted frame.
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  MapAndSession m;
+  const std::vector<FakeKeyFrame> looped = loadedMapThenNewSession(pg, 6, &m);
+  ASSERT_EQ(looped.size(), 6u);
+  ASSERT_TRUE(listen.waitFor(9, 9));
+  ASSERT_EQ(listen.verdicts_.size(), 9u);
+  int earliest = -1;  // of the map's stored loops and the session's released ones
+  for (int i = 0; i < 2 * m.per_lap; ++i) {
+    auto c = m.candidates.find(i);
+    if (c != m.candidates.end() && c->second->is_true && (earliest == -1 || c->second->candidate.match_index < earliest))
+      earliest = static_cast<int>(c->second->candidate.match_index);
+  }
+  for (size_t i = 0; i < 3; ++i) {
+    SCOPED_TRACE(i);
+    const LoopVerdict& held = listen.verdicts_[i];
+    EXPECT_EQ(held.query_index, looped[i].index);
+    EXPECT_FALSE(held.accepted);
+    EXPECT_FALSE(held.final);
+    EXPECT_EQ(held.reason, LoopVerdict::DEFERRED) << held.detail;
+    EXPECT_EQ(held.decision, LoopVerdict::VERIFY);
+    if (i < 2) {  // (the third's addKeyFrame already applied the releases its verify made)
+      EXPECT_FALSE(looped[i].has_loop) << "held: not on the keyframe while held";
+      EXPECT_EQ(looped[i].loop_index, -1);
+    }
+    const LoopVerdict& released = listen.verdicts_[3 + i];
+    EXPECT_EQ(released.query_index, looped[i].index);
+    EXPECT_TRUE(released.accepted) << released.detail;
+    EXPECT_TRUE(released.final);
+    EXPECT_EQ(released.reason, LoopVerdict::ACCEPTED);
+    EXPECT_EQ(released.decision, LoopVerdict::RELEASE);
+    const Detection& d = m.detections.at(looped[i].index);
+    EXPECT_EQ(released.inliers, d.inliers);
+    // Applied to its keyframe as findConnection had set it.
+    const FakeKeyFrame& kf = pg.keyframelist.at(looped[i].index);
+    EXPECT_TRUE(kf.has_loop);
+    EXPECT_EQ(kf.loop_index, d.loop_index);
+    EXPECT_TRUE(kf.loop_info == d.loop_info) << kf.loop_info.transpose() << " vs " << d.loop_info.transpose();
+    EXPECT_EQ(kf.loop_inliers, d.inliers);
+    earliest = std::min(earliest, d.loop_index);
+    // In the map's frame now: shifted once (the first exactly onto where its loop puts it).
+    EXPECT_LT((kf.vio_T_w_i - placedByLoop(pg, kf)).norm(), i == 0 ? 1e-9 : 0.3) << kf.vio_T_w_i.transpose();
+  }
+  EXPECT_EQ(pg.sequence_loop[1], 1);
+  EXPECT_FALSE(pg.w_r_vio.isIdentity());
+  EXPECT_EQ(pg.earliest_loop_index, earliest);
+  for (size_t i = 3; i < 6; ++i) {
+    // Verified against the prior, in the frame loop_fusion shifted the session into.
+    const LoopVerdict& v = listen.verdicts_[3 + i];
+    EXPECT_EQ(v.query_index, looped[i].index);
+    EXPECT_EQ(v.reason, LoopVerdict::ACCEPTED) << v.detail;
+    EXPECT_EQ(v.decision, LoopVerdict::VERIFY);
+    EXPECT_TRUE(v.final);
+    EXPECT_LT(v.score, 0.2) << v.detail;
+    EXPECT_TRUE(looped[i].has_loop);
+  }
+  // The releases were applied at the end of the addKeyFrame whose verification confirmed them
+  // (the third): each useLoop queues its keyframe, then one optimisation up to the newest.
+  const int q3 = looped[2].index;
+  EXPECT_EQ(pg.optimize_buf, (std::vector<int>{looped[0].index, q3, looped[1].index, q3, q3, q3, looped[3].index,
+                                               looped[4].index, looped[5].index}));
+  EXPECT_EQ(pg.rover.heldCount(), 0u);
+}
+
+TEST_F(Adapter, AnUnconfirmedRelocalisationIsDroppedAndNeverUsed) {
+  // A look-alike of the map seen once from the new session: held, nothing agrees with it within
+  // confirm_window (40) keyframes, dropped (reason unconfirmed). loop_fusion never saw it as a
+  // loop: no shift, no optimisation, not saved.
+  const std::string file = tempFile("dropped_pose_graph.txt");
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  MapAndSession m;
+  loadMap(pg, m);
+  const int earliest_of_the_map = pg.earliest_loop_index;
+  const int end = 3 * m.per_lap;
+  const sim::SimCandidate* lookalike = nullptr;
+  for (const sim::SimCandidate& c : m.scene.candidates)
+    if (!c.is_true && c.candidate.query_index >= 2 * m.per_lap && c.candidate.match_index < 2 * m.per_lap &&
+        c.candidate.query_index + 45 < end) {
+      lookalike = &c;
+      break;
+    }
+  ASSERT_NE(lookalike, nullptr);
+  const int q = static_cast<int>(lookalike->candidate.query_index);
+  for (int i = 2 * m.per_lap; i <= q + 45; ++i)
+    sessionKeyFrame(pg, m, i, [&](const sim::SimCandidate& c) { return &c == lookalike; });
+  ASSERT_TRUE(listen.waitFor(2, 2));
+  ASSERT_EQ(listen.verdicts_.size(), 2u);
+  EXPECT_EQ(listen.verdicts_[0].reason, LoopVerdict::DEFERRED) << listen.verdicts_[0].detail;
+  EXPECT_FALSE(listen.verdicts_[0].final);
+  const LoopVerdict& dropped = listen.verdicts_[1];
+  EXPECT_EQ(dropped.query_index, q);
+  EXPECT_FALSE(dropped.accepted);
+  EXPECT_TRUE(dropped.final);
+  EXPECT_EQ(dropped.reason, LoopVerdict::UNCONFIRMED) << dropped.detail;
+  EXPECT_EQ(dropped.decision, LoopVerdict::DROP);
+  const FakeKeyFrame& kf = pg.keyframelist.at(q);
+  EXPECT_FALSE(kf.has_loop);
+  EXPECT_EQ(kf.loop_index, -1);
+  EXPECT_TRUE(kf.loop_info.isZero());
+  EXPECT_EQ(pg.sequence_loop[1], 0);
+  EXPECT_TRUE(pg.w_r_vio.isIdentity());
+  EXPECT_EQ(pg.earliest_loop_index, earliest_of_the_map);
+  EXPECT_TRUE(pg.optimize_buf.empty());
+  EXPECT_EQ(pg.rover.heldCount(), 0u);
+  pg.savePoseGraph(file);
+  FakePoseGraph next;
+  ASSERT_TRUE(next.setIMUFlag(true));
+  ASSERT_EQ(next.loadPoseGraph(file), q + 46);
+  EXPECT_EQ(next.keyframelist.at(q).loop_index, -1) << "a dropped loop is not saved";
+  std::remove(file.c_str());
+}
+
+namespace {
+
+/// A verifier the test scripts, for the adapter's side of held, released, dropped and revoked
+/// loops (core::Verifier does not emit revocations yet): a candidate whose query keyframe is in
+/// `hold` gets a deferred verdict, any other is accepted; the decisions the test queues with
+/// decide() are handed out by the next takeDecisions(), after an addKeyframe or a verify.
+class ScriptedVerifier : public LoopVerifier {
+ public:
+  struct Script {
+    std::set<int64_t> hold;
+    std::map<std::pair<int64_t, int64_t>, core::LoopCandidate> seen;
+    std::vector<core::LoopDecision> queued;
+    void decide(core::LoopDecision::Kind kind, int64_t query, int64_t match) {
+      core::LoopDecision d;
+      d.kind = kind;
+      d.candidate = seen.at(std::make_pair(query, match));
+      if (kind == core::LoopDecision::Kind::kRelease)
+        d.verdict = core::Verdict::Accept(d.candidate, "released by the script");
+      else
+        d.verdict = core::Verdict::Reject(
+            kind == core::LoopDecision::Kind::kDrop ? core::Reason::kUnconfirmed : core::Reason::kRevoked, d.candidate,
+            std::string(core::toString(kind)) + " by the script");
+      queued.push_back(d);
+    }
+  };
+  explicit ScriptedVerifier(std::shared_ptr<Script> script) : script_(std::move(script)) {}
+  core::Status addKeyframe(int64_t, double, int, const Eigen::Vector3d&, const Eigen::Quaterniond&) override {
+    return core::Status::Ok();
+  }
+  core::Verdict verify(const core::LoopCandidate& c) override {
+    script_->seen[std::make_pair(c.query_index, c.match_index)] = c;
+    if (script_->hold.count(c.query_index)) return core::Verdict::Defer(c, "held by the script");
+    return core::Verdict::Accept(c, "accepted by the script");
+  }
+  core::Status commit(const core::LoopCandidate&) override { return core::Status::Ok(); }
+  std::vector<core::LoopDecision> takeDecisions() override {
+    std::vector<core::LoopDecision> out;
+    out.swap(script_->queued);
+    return out;
+  }
+
+ protected:
+  bool onInitialize() override { return true; }
+
+ private:
+  std::shared_ptr<Script> script_;
+};
+
+/// The markers of one MarkerArray as "ACTION ns id" strings.
+std::vector<std::string> markerIds(const MarkerArray& arr) {
+  std::vector<std::string> out;
+  for (const Marker& mk : arr.markers)
+    out.push_back(std::string(mk.action == Marker::DELETE ? "DELETE " : "ADD ") + mk.ns + " " + std::to_string(mk.id));
+  return out;
+}
+
+}  // namespace
+
+TEST_F(Adapter, HeldLoopsAreAppliedWhenReleasedRemovedWhenRevokedAndSavedOnlyWhileUsed) {
+  // Held 50 -> 2 released, held 51 -> 3 dropped, accepted 52 -> 4 revoked, held 55 -> 5 still
+  // held at the end. loop_fusion (FakePoseGraph: the patch's calls and useLoop) applies each to
+  // its keyframe; every candidate has exactly one final verdict, every used loop exactly one
+  // accepting one; markers change colour; the CSV log says final and decision; a save and load
+  // holds only the loop in use.
+  const std::string log = tempFile("deferred.csv");
+  const std::string file = tempFile("deferred_pose_graph.txt");
+  ros::param::set("~verdict_log", log);
+  std::shared_ptr<ScriptedVerifier::Script> script = std::make_shared<ScriptedVerifier::Script>();
+  script->hold = {50, 51, 55};
+  FakePoseGraph pg;
+  pg.use_imu = true;
+  ASSERT_TRUE(pg.rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new ScriptedVerifier(script)),
+                                              "test/Scripted"));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  std::map<int, Detection> found;
+  auto add = [&](int i) -> const FakeKeyFrame& {
+    FakeKeyFrame kf;
+    kf.time_stamp = 1.0 + i;
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0.0, 0.0);
+    std::unique_ptr<Detection> d;
+    if (i >= 50 && i != 53 && i != 54) {
+      LoopInfo info;
+      info << 0.1 + 0.001 * i, -0.02, 0.003, 1.0, 0.0, 0.0, 0.0, 0.5;
+      d.reset(new Detection{i - 48, info, i - 17});
+      found[i] = *d;
+    }
+    return pg.addKeyFrame(kf, d.get());
+  };
+  for (int i = 0; i < 50; ++i) add(i);
+  EXPECT_FALSE(add(50).has_loop);
+  EXPECT_FALSE(add(51).has_loop);
+  EXPECT_TRUE(add(52).has_loop);
+  EXPECT_EQ(pg.rover.heldCount(), 2u);
+  EXPECT_EQ(pg.optimize_buf, std::vector<int>{52});
+  EXPECT_EQ(pg.earliest_loop_index, 4);
+
+  script->decide(core::LoopDecision::Kind::kRelease, 50, 2);
+  script->decide(core::LoopDecision::Kind::kDrop, 51, 3);
+  add(53);  // the decisions come with this keyframe
+  const FakeKeyFrame& released = pg.keyframelist.at(50);
+  EXPECT_TRUE(released.has_loop);
+  EXPECT_EQ(released.loop_index, 2);
+  EXPECT_TRUE(released.loop_info == found[50].loop_info) << released.loop_info.transpose();
+  EXPECT_EQ(released.loop_inliers, found[50].inliers);
+  EXPECT_FALSE(pg.keyframelist.at(51).has_loop);
+  EXPECT_EQ(pg.keyframelist.at(51).loop_index, -1);
+  EXPECT_EQ(pg.earliest_loop_index, 2);
+  EXPECT_EQ(pg.optimize_buf, (std::vector<int>{52, 50, 53}));  // useLoop(50), then up to the newest
+  EXPECT_EQ(pg.rover.heldCount(), 0u);
+
+  script->decide(core::LoopDecision::Kind::kRevoke, 52, 4);
+  add(54);
+  const FakeKeyFrame& revoked = pg.keyframelist.at(52);
+  EXPECT_FALSE(revoked.has_loop);
+  EXPECT_EQ(revoked.loop_index, -1);
+  EXPECT_TRUE(revoked.loop_info.isZero());
+  EXPECT_EQ(revoked.loop_inliers, -1);
+  EXPECT_EQ(pg.optimize_buf, (std::vector<int>{52, 50, 53, 54}));
+  EXPECT_FALSE(add(55).has_loop);
+  EXPECT_EQ(pg.rover.heldCount(), 1u);
+  EXPECT_EQ(pg.rover.verdictCount(), 7u);
+
+  // ~loop_verdicts: one final verdict per candidate, one accepting verdict per used loop.
+  ASSERT_TRUE(listen.waitFor(7, 7));
+  ASSERT_EQ(listen.verdicts_.size(), 7u);
+  struct Expected {
+    int query;
+    bool accepted, final;
+    const char* reason;
+    const char* decision;
+  };
+  const Expected expected[] = {
+      {50, false, false, "deferred", "verify"}, {51, false, false, "deferred", "verify"},
+      {52, true, true, "accepted", "verify"},   {50, true, true, "accepted", "release"},
+      {51, false, true, "unconfirmed", "drop"}, {52, false, true, "revoked", "revoke"},
+      {55, false, false, "deferred", "verify"}};
+  for (size_t i = 0; i < 7; ++i) {
+    SCOPED_TRACE(i);
+    const LoopVerdict& v = listen.verdicts_[i];
+    EXPECT_EQ(v.query_index, expected[i].query);
+    EXPECT_EQ(v.match_index, expected[i].query - 48);
+    EXPECT_EQ(v.accepted, expected[i].accepted);
+    EXPECT_EQ(v.final, expected[i].final);
+    EXPECT_EQ(v.reason, expected[i].reason);
+    EXPECT_EQ(v.decision, expected[i].decision);
+    EXPECT_EQ(v.inliers, expected[i].query - 17);
+    EXPECT_EQ(v.verifier, "test/Scripted");
+    EXPECT_NEAR(v.query_stamp.toSec(), 1.0 + expected[i].query, 1e-9);
+  }
+
+  // ~loop_markers: a held loop is amber; its final verdict replaces the marker (same id,
+  // another namespace); a revocation turns the green marker red.
+  ASSERT_EQ(listen.markers_.size(), 7u);
+  std::vector<int> id(7);
+  for (size_t i = 0; i < 7; ++i) id[i] = listen.markers_[i].markers.back().id;
+  auto ids = [&](size_t i) { return markerIds(listen.markers_[i]); };
+  const std::string a = std::to_string(id[0]), b = std::to_string(id[1]), c = std::to_string(id[2]);
+  EXPECT_EQ(ids(0), (std::vector<std::string>{"ADD held_loops " + a, "ADD held_loops_score " + a}));
+  EXPECT_EQ(ids(3), (std::vector<std::string>{"DELETE held_loops " + a, "DELETE held_loops_score " + a,
+                                              "ADD accepted_loops " + a, "ADD accepted_loops_score " + a}));
+  EXPECT_EQ(ids(4), (std::vector<std::string>{"DELETE held_loops " + b, "DELETE held_loops_score " + b,
+                                              "ADD rejected_loops " + b, "ADD rejected_loops_score " + b}));
+  EXPECT_EQ(ids(5), (std::vector<std::string>{"DELETE accepted_loops " + c, "DELETE accepted_loops_score " + c,
+                                              "ADD revoked_loops " + c, "ADD revoked_loops_score " + c}));
+  const Marker& amber = listen.markers_[0].markers[0];
+  const Marker& green = listen.markers_[3].markers[2];
+  const Marker& red = listen.markers_[5].markers[2];
+  EXPECT_GT(amber.color.r, 0.5);
+  EXPECT_GT(amber.color.g, 0.5);
+  EXPECT_GT(green.color.g, green.color.r);
+  EXPECT_GT(red.color.r, red.color.g);
+  EXPECT_TRUE(contains(listen.markers_[3].markers[3].text, "(release)")) << listen.markers_[3].markers[3].text;
+
+  // ~verdict_log: the columns final and decision.
+  const std::vector<std::string> rows = readLines(log);
+  ASSERT_EQ(rows.size(), 8u);
+  EXPECT_TRUE(contains(rows[0], ",detail,final,decision")) << rows[0];
+  for (size_t i = 0; i < 7; ++i) {
+    const std::string tail = std::string(",") + (expected[i].final ? "1" : "0") + "," + expected[i].decision;
+    EXPECT_EQ(rows[i + 1].substr(rows[i + 1].size() - tail.size()), tail) << rows[i + 1];
+  }
+
+  // savePoseGraph -> loadPoseGraph: only the loop in use (released 50 -> 2) is stored; the
+  // dropped, revoked and still held ones are not.
+  pg.savePoseGraph(file);
+  FakePoseGraph next;
+  ASSERT_TRUE(next.setIMUFlag(true));
+  ASSERT_EQ(next.loadPoseGraph(file), 56);
+  std::set<int> stored;
+  for (const auto& kf : next.keyframelist)
+    if (kf.second.loop_index != -1) stored.insert(kf.first);
+  EXPECT_EQ(stored, std::set<int>{50});
+  EXPECT_NEAR((next.keyframelist.at(50).loop_info - found[50].loop_info).norm(), 0.0, 1e-5);  // %f in the file
+  std::remove(log.c_str());
+  std::remove(file.c_str());
+}
+
+TEST_F(Adapter, AReleasedFirstLoopOfAnEarlierSessionShiftsThatSessionOnly) {
+  // A loaded map (sequence 0), session 1 holds its first loop into the map, session 2 starts
+  // before the verifier releases it. useLoop shifts session 1 into the map's frame (the
+  // released query once) and leaves w_r_vio / w_t_vio, the shift of the keyframes still to come
+  // (session 2's), alone.
+  std::shared_ptr<ScriptedVerifier::Script> script = std::make_shared<ScriptedVerifier::Script>();
+  script->hold = {15};
+  FakePoseGraph pg;
+  pg.use_imu = true;
+  ASSERT_TRUE(pg.rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new ScriptedVerifier(script)),
+                                              "test/Scripted"));
+  for (int i = 0; i < 10; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = 1.0 + i;
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0.0, 0.0);
+    ASSERT_TRUE(pg.loadKeyFrame(kf));
+  }
+  const Eigen::Matrix3d turned = yawR(40.0);
+  for (int i = 10; i < 30; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = 1.0 + i;
+    kf.sequence = i < 20 ? 1 : 2;
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * (i % 10), 7.0 * kf.sequence, 0.0);
+    kf.vio_R_w_i = turned;
+    if (i == 25) script->decide(core::LoopDecision::Kind::kRelease, 15, 5);
+    if (i == 15) {
+      // findConnection: keyframe 15 is where keyframe 5 is, facing the same way
+      const Eigen::Quaterniond q(turned.transpose());
+      const Detection d{5, (LoopInfo() << 0, 0, 0, q.w(), q.x(), q.y(), q.z(), -40.0).finished(), 30};
+      EXPECT_FALSE(pg.addKeyFrame(kf, &d).has_loop);
+    } else {
+      pg.addKeyFrame(kf, nullptr);
+    }
+  }
+  const FakeKeyFrame& released = pg.keyframelist.at(15);
+  EXPECT_TRUE(released.has_loop);
+  EXPECT_EQ(released.loop_index, 5);
+  EXPECT_LT((released.vio_T_w_i - pg.keyframelist.at(5).vio_T_w_i).norm(), 1e-9) << released.vio_T_w_i.transpose();
+  EXPECT_LT((pg.keyframelist.at(16).vio_T_w_i - Eigen::Vector3d(3.0, 0.0, 0.0)).norm(), 1e-9)
+      << "the rest of session 1 follows";
+  EXPECT_EQ(pg.sequence_loop, (std::vector<int>{0, 1, 0}));
+  EXPECT_TRUE(pg.w_r_vio.isIdentity());
+  EXPECT_TRUE(pg.w_t_vio.isZero());
+  for (int i = 20; i < 30; ++i)
+    EXPECT_LT((pg.keyframelist.at(i).vio_T_w_i - Eigen::Vector3d(0.5 * (i % 10), 14.0, 0.0)).norm(), 1e-12) << i;
+  EXPECT_EQ(pg.optimize_buf, (std::vector<int>{15, 25}));
+  EXPECT_EQ(pg.earliest_loop_index, 5);
+}
+
 TEST_F(Adapter, HostDerivedKeysInTheVerifierYamlAreIgnoredWithAnError) {
   // anchor_incoming_keyframes: true would make the verifier shift the session a second time on
   // top of loop_fusion's w_r_vio / w_t_vio (later loops would look metres off and be rejected);
@@ -641,14 +1068,17 @@ TEST_F(Adapter, HostDerivedKeysInTheVerifierYamlAreIgnoredWithAnError) {
   ros::param::set("~relocalisation", "accept_unverified");
   ros::param::set("~rover/anchor_incoming_keyframes", true);
   ros::param::set("~rover/accept_without_prior", false);
+  ros::param::set("~rover/confirm_without_prior", true);
   LogCapture log;
   ASSERT_TRUE(log.connect());
   FakePoseGraph pg;
   const bool started = pg.setIMUFlag(true);
   ros::param::del("~rover/anchor_incoming_keyframes");
   ros::param::del("~rover/accept_without_prior");
+  ros::param::del("~rover/confirm_without_prior");
   ASSERT_TRUE(started);
-  for (const char* key : {"/loop_fusion/rover/anchor_incoming_keyframes", "/loop_fusion/rover/accept_without_prior"})
+  for (const char* key : {"/loop_fusion/rover/anchor_incoming_keyframes", "/loop_fusion/rover/accept_without_prior",
+                          "/loop_fusion/rover/confirm_without_prior"})
     EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::ERROR, {key, "ignored", "host"}).empty()) << key;
   Listener listen;
   ASSERT_TRUE(listen.connect());
@@ -672,7 +1102,7 @@ TEST_F(Adapter, EveryDecisionParameterIsLoggedAtStartUp) {
   for (const std::string& name : verifierParameterNames())
     EXPECT_TRUE(contains(line, " " + name + "=") || contains(line, ": " + name + "=")) << name << " not in: " << line;
   EXPECT_TRUE(contains(line, "max_innovation=0.5 max_innovation_per_metre=0.02")) << line;  // rover_indoor.yaml
-  EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::INFO, {"relocalisation: reject"}).empty());
+  EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::INFO, {"relocalisation: confirm"}).empty());
 }
 
 TEST_F(Adapter, RejectedLoopsAreNotSavedInThePoseGraph) {
@@ -889,7 +1319,7 @@ TEST(AdapterStop, BadRelocalisationPolicyStops) {
   ros::param::set("/rover_host_reloc/relocalisation", std::string("accept"));
   const HostRun r = runHost("rover_host_reloc");
   EXPECT_EQ(r.exit_code, 1) << r.output;
-  EXPECT_TRUE(contains(r.output, "/rover_host_reloc/relocalisation must be reject or accept_unverified")) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_reloc/relocalisation must be confirm, reject or accept_unverified")) << r.output;
 }
 
 // ---- host safety ---------------------------------------------------------------------------
@@ -900,7 +1330,7 @@ namespace {
 class MisbehavingVerifier : public LoopVerifier {
  public:
   bool throw_on_init = false, throw_on_add = false, throw_on_verify = false, throw_on_commit = false,
-       refuse_commit = false, throw_on_trajectory = false;
+       refuse_commit = false, throw_on_estimate = false;
   core::Status addKeyframe(int64_t, double, int, const Eigen::Vector3d&, const Eigen::Quaterniond&) override {
     if (throw_on_add) throw std::runtime_error("addKeyframe exploded");
     return core::Status::Ok();
@@ -913,9 +1343,9 @@ class MisbehavingVerifier : public LoopVerifier {
     if (throw_on_commit) throw 42;  // not even a std::exception
     return refuse_commit ? core::Status::Error("no room") : core::Status::Ok();
   }
-  std::vector<core::TrajectoryPoint> trajectory() const override {
-    if (throw_on_trajectory) throw std::runtime_error("trajectory exploded");
-    return {};
+  bool estimate(int64_t, core::Pose*) const override {
+    if (throw_on_estimate) throw std::runtime_error("estimate exploded");
+    return false;
   }
 
  protected:
@@ -950,7 +1380,7 @@ TEST_F(Adapter, ExceptionsFromTheVerifierNeverReachTheHostAndRejectTheLoop) {
       {"addKeyframe throws", &MisbehavingVerifier::throw_on_add, true, ""},
       // drawing the marker fails after the commit: the loop is used and its verdict published
       // (every committed loop has exactly one verdict), without the marker
-      {"trajectory (markers) throws", &MisbehavingVerifier::throw_on_trajectory, true, ""},
+      {"estimate (markers) throws", &MisbehavingVerifier::throw_on_estimate, true, ""},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.what);

@@ -75,7 +75,7 @@ class DemoLaunch(unittest.TestCase):
         self.assertEqual(params["/rover_verifier/candidate_topic"], "/loop_fusion/loop_candidates")
         self.assertEqual(params["/rover_verifier/rover/threshold"], 0.2)
         self.assertNotIn("/rover_verifier/threshold", params)
-        self.assertEqual(params["/rover_verifier/relocalisation"], "reject")
+        self.assertEqual(params["/rover_verifier/relocalisation"], "confirm")
         # Respawned when it exits (the master watchdog exits after a master restart), unless
         # it is required (roslaunch refuses both).
         self.assertTrue(node.respawn)

@@ -45,7 +45,7 @@ class VinsRoverLaunch(unittest.TestCase):
         self.assertEqual(params["/loop_fusion/verdict_log"], "")
         self.assertIs(params["/loop_fusion/publish_markers"], True)
         self.assertEqual(params["/loop_fusion/marker_frame"], "world")
-        self.assertEqual(params["/loop_fusion/relocalisation"], "reject")  # fail closed
+        self.assertEqual(params["/loop_fusion/relocalisation"], "confirm")  # held until confirmed
         self.assertEqual(params["/loop_fusion/rover/threshold"], 0.2)  # config/rover_indoor.yaml
         for name in PARAM_NAMES:
             self.assertIn("/loop_fusion/rover/" + name, params)

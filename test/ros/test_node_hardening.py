@@ -319,7 +319,7 @@ class NodeHardening(unittest.TestCase):
                  ("queue_size", 0, "queue_size must be in [1, 10000000]"),
                  ("optimize_iterations", 100000, "optimize_iterations must be in [1, 1000]"),
                  ("stamp_tolerance", 2.0, "stamp_tolerance must be in [0, 0.5] s"),
-                 ("relocalisation", "sometimes", "relocalisation must be reject or accept_unverified"),
+                 ("relocalisation", "sometimes", "relocalisation must be confirm, reject or accept_unverified"),
                  ("keyframe_topic", "bad topic!", "keyframe_topic is not a valid topic name")]
         for i, (key, value, message) in enumerate(cases):
             with self.subTest(key=key, value=value):
