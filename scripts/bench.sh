@@ -20,7 +20,7 @@ cd "$ROVER_ROOT"
 if [ "$family" = evaluate ]; then exec "$ROVER_PYTHON" scripts/evaluate.py "$@"; fi
 if [ "$family" = diagnostics ]; then exec "$ROVER_PYTHON" scripts/verdict_diagnostics.py "$@"; fi
 if [ "$family" = all ]; then
-  for f in poc real posegraph cost; do "$ROVER_PYTHON" "scripts/bench_$f.py" "$@"; done
+  for f in poc real posegraph cost; do "$ROVER_PYTHON" "scripts/bench/$f.py" "$@"; done
   exit 0
 fi
-exec "$ROVER_PYTHON" "scripts/bench_$family.py" "$@"
+exec "$ROVER_PYTHON" "scripts/bench/$family.py" "$@"

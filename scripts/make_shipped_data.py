@@ -21,7 +21,6 @@ import os
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 import simulate  # noqa: E402
 from roverlib import bag  # noqa: E402

@@ -8,7 +8,7 @@ import sys
 
 from . import metrics
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+ROOT = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", ".."))  # the clone, not .ws/src
 TOOLS = os.path.join(os.environ.get("ROVER_WS", os.path.join(ROOT, ".ws")), "devel", "lib", "rover_loop_fusion")
 RESULTS = os.path.join(ROOT, "results")
 # rover_replay flags that switch the innovation gate off: the scoring protocols (oracle, none)

@@ -14,7 +14,7 @@ from .scenario import Candidate, Keyframe, Scenario
 from .scenes import perturb, small_pose
 
 DATA = os.environ.get("ROVER_SHARED_DATA",
-                      os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data"))
+                      os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "..", "shared", "data"))
 
 # name -> (estimate file, ground-truth file, mode, alignment, environment)
 SEQUENCES = {

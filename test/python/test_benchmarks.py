@@ -5,13 +5,10 @@ import os
 
 import pytest
 
-from conftest import built_tool
-
-import bench_cost
-import bench_poc
-import bench_posegraph
-import bench_real
+from conftest import built_tool, script
 from roverlib import bench
+
+bench_cost, bench_poc, bench_posegraph, bench_real = (script(f"bench/{f}.py") for f in ("cost", "poc", "posegraph", "real"))
 
 
 @pytest.fixture(autouse=True)

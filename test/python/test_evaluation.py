@@ -7,10 +7,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import built_tool
+from conftest import built_tool, script
 from roverlib import metrics, scenario, scenes
 
-import evaluate
+evaluate = script("evaluate.py")
 
 HEADER = ("query_stamp,match_stamp,query_index,match_index,accepted,reason,score,threshold,converged,"
           "iterations,window_size,solve_ms,elapsed_ms,inliers,innovation,path_length,verifier,detail")

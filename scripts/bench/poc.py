@@ -24,7 +24,6 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 from roverlib import bench, metrics, scenario, scenes  # noqa: E402
 

@@ -28,7 +28,6 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 from roverlib import bench, metrics, real_data, scenario  # noqa: E402
 

@@ -37,7 +37,6 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 from roverlib import bench, g2o, metrics, robust, scenario  # noqa: E402
 

@@ -23,7 +23,6 @@ import sys
 import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 from roverlib import bench, metrics  # noqa: E402
 
