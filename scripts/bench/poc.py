@@ -1,101 +1,133 @@
 #!/usr/bin/env python3
-"""Proof-of-concept benchmark (the paper's PoC): Room, Sports ground, Warehouse at odometry
-noise sigma 0.01 .. 0.175, 100 true + 100 false loop candidates each (seed 0).
+"""Simulated scenes: the paper's proof of concept (Room, Sports ground, Warehouse at odometry
+noise sigma 0.01 .. 0.175) and the hard cases (near look-alikes laterally, vertically and along
+the track, rows of them, a row before the first true loop, sigma up to 0.35, many laps, city
+laps with the first loop after 1-2 km, a scene without true loops); roverlib/splits.py lists
+them, tuning and test.
 
-  ./scripts/bench.sh poc [--quick] [--out results/poc] [--jobs 2]
+  ./scripts/bench.sh poc [--split test|tuning] [--quick] [--cases A,B] [--snapshots 10]
+                         [--jobs 2] [--out results/poc]
 
-Every scenario is replayed three times with rover_replay:
-  oracle      only true loops committed: each candidate scored against the graph a perfect
-              verifier would have built -> AP, MR of the ROVER score (innovation gate off);
-  none        nothing committed: each candidate scored against odometry alone (the paper's
-              PoC setting) -> AP, MR of the score (gate off);
-  sequential  the product at config/rover_indoor.yaml's threshold and innovation gate: verify
-              in arrival order, commit what is accepted -> precision, recall of the decisions
-              ("gated": candidates the innovation gate rejected before the solve).
-The trial solve's 200 ms time budget is lifted (--time_budget_ms 0): it is wall-clock time,
-and on a loaded machine it turned verdicts into time_budget_exceeded and changed AP from run to
-run; ">200ms" reports the share of verifications that took longer (real family: KITTI 09 shows
-the budget's effect). Prints the table, writes poc.csv, summary.md, pr_oracle.png, pr_none.png
-into --out.
---quick (CI): the room at two noise levels, 40 + 40 candidates."""
+Per case (rover_replay, the trial solve's wall-clock time budget lifted: ">200ms" is the share
+of verifications that took longer and would have failed closed):
+  AP, MR       the ROVER score as a ranking (innovation gate off: the paper's metric), from two
+               scoring protocols: oracle (only true loops committed) and none (nothing
+               committed, the paper's PoC setting);
+  decisions    the product: sequential, at config/rover_<environment>.yaml (threshold and
+               innovation gate): TP/FP/FN, precision ("-": nothing accepted), recall, counts per
+               verdict reason; accept-all beside it;
+  trajectories ATE and tATE (evo, SE(3)) with loop_fusion's back end (lf) and gtsam LM with the
+               indoor/outdoor drift model (roverlib/drift_model.py), each next to the true-only
+               solution of the same back end (roverlib/methods.py).
+Writes summary.csv (one row per case x method, roverlib.bench.SUMMARY_COLUMNS), cases.csv,
+summary.md, pr_oracle.png, pr_none.png, poc.png into --out."""
 import argparse
 import os
 import sys
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+from roverlib import bench, drift_model, methods, metrics, problem, scenario
 
-from roverlib import bench, metrics, scenario, scenes  # noqa: E402
+CASE_COLUMNS = [("case", "case", ""), ("environment", "env", ""), ("keyframes", "kf", "d"), ("true", "true", "d"),
+                ("false", "false", "d"), ("ap_oracle", "AP oracle", ".3f"), ("mr_oracle", "MR oracle", ".2f"),
+                ("ap_none", "AP none", ".3f"), ("mr_none", "MR none", ".2f"),
+                ("rover_tp", "TP", "d"), ("rover_fp", "FP", "d"), ("rover_fn", "FN", "d"),
+                ("rover_precision", "P", ".3f"), ("rover_recall", "R", ".3f"), ("rover_reasons", "verdicts", ""),
+                ("rover_over_200ms", ">200ms", ".2f")]
+TRAJ_COLUMNS = [("case", "case", ""), ("ate_odometry", "odometry", ".2f"),
+                ("ate_true_only_lf", "LF true-only", ".2f"), ("ate_accept_all+lf", "LF accept-all", ".2f"),
+                ("ate_rover+lf", "LF ROVER", ".2f"), ("tate_rover+lf", "LF ROVER tATE", ".2f"),
+                ("ate_true_only_lm", "LM true-only", ".2f"), ("ate_accept_all+lm", "LM accept-all", ".2f"),
+                ("ate_rover+lm", "LM ROVER", ".2f"), ("tate_rover+lm", "LM ROVER tATE", ".2f")]
 
-SCENES = ("room", "sports_ground", "warehouse")
-SIGMAS = (0.01, 0.05, 0.1, 0.15, 0.175)
-PROTOCOLS = ("oracle", "none", "sequential")
-COLUMNS = [("scene", "scene", ""), ("sigma", "sigma", "g"), ("true", "true", "d"), ("false", "false", "d"),
-           ("ap_oracle", "AP oracle", ".4f"), ("mr_oracle", "MR oracle", ".3f"),
-           ("ap_none", "AP none", ".4f"), ("mr_none", "MR none", ".3f"),
-           ("seq_precision", "seq P", ".3f"), ("seq_recall", "seq R", ".3f"), ("seq_fp", "seq FP", "d"),
-           ("seq_gated", "gated", "d"),
-           (">200ms", ">200ms", ".2f"), ("target", "AP>=0.995 & MR>=0.95", "")]
 
-
-def run_case(name, sigma, n, out, params):
-    d = os.path.join(out, "scenarios", f"{name}_s{sigma:g}")
-    s = scenes.make_scene(name, sigma, seed=0, n_true=n, n_false=n)
+def run_case(job):
+    case, out, snapshots = job
+    params = bench.defaults(case.environment)
+    s = case.build()
+    d = os.path.join(out, "scenarios", case.name)
     scenario.write(s, d)
-    row = {"scene": name, "sigma": sigma, "true": s.meta["true_candidates"], "false": s.meta["false_candidates"],
-           "threshold": params["threshold"]}
+    labels = os.path.join(d, "candidates.csv")
     curves = {}
-    slow = []
-    for p in PROTOCOLS:
-        decide = bench.decision_args(params) if p == "sequential" else ["--threshold", params["threshold"]] + bench.GATE_OFF
-        run = bench.replay(d, os.path.join(out, "runs", f"{name}_s{sigma:g}_{p}"), p, decide + ["--time_budget_ms", 0])
-        j = bench.labelled(run, os.path.join(d, "candidates.csv"))
-        slow += [float(r["elapsed_ms"]) > 200.0 for r in j["rows"]]
-        if p == "sequential":
-            dm = metrics.decision_metrics(j["label"], j["accepted"])
-            row.update(seq_precision=dm["precision"], seq_recall=dm["recall"], seq_tp=dm["tp"], seq_fp=dm["fp"],
-                       seq_fn=dm["fn"], seq_gated=sum(r == "innovation_above_bound" for r in j["reason"]))
-        else:
-            r = metrics.ranking_metrics(j["label"], j["score"])
-            row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
-            curves[p] = r
-    row[">200ms"] = sum(slow) / len(slow)
-    if sigma <= 0.1:
-        ok = [row[f"ap_{p}"] >= 0.995 and row[f"mr_{p}"] >= 0.95 for p in ("oracle", "none")]
-        row["target"] = "/".join("met" if o else "UNMET" for o in ok) + " (oracle/none)"
-    else:
-        row["target"] = "-"
-    return row, curves
+    row = {"environment": case.environment}
+    for p in ("oracle", "none"):
+        run = bench.replay(d, os.path.join(out, "runs", case.name, p), p,
+                           ["--mode", "4dof", "--threshold", params["threshold"], "--time_budget_ms", 0] + bench.GATE_OFF)
+        j = bench.labelled(run, labels)
+        r = metrics.ranking_metrics(j["label"], j["score"])
+        row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
+        curves[p] = r
+    prob = problem.from_scenario(s, drift_model.MODELS[case.environment], "4dof")
+    info, rows = methods.evaluate(case, d, prob, [], params, out, methods=("rover", "accept_all"), snapshots=snapshots)
+    row.update(info)
+    for r in rows:
+        if r["method"].startswith("rover"):
+            row.update({f"rover_{k}": r[k] for k in ("tp", "fp", "fn", "precision", "recall")})
+        row[f"ate_{r['method']}"], row[f"tate_{r['method']}"] = r["ate"], r["tate"]
+    row["ate_odometry"] = row.pop("ate_odometry", float("nan"))
+    print(f"  {case.name}: ROVER TP {row['rover_tp']} FP {row['rover_fp']} FN {row['rover_fn']}", flush=True)
+    return row, rows, curves
+
+
+def plot(rows, path):
+    """Per case: ROVER's precision and recall, and its ATE over the true-only ATE per back end."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    fig, (ax, bx) = plt.subplots(2, 1, figsize=(max(8.0, 0.45 * len(rows) + 2), 7.0), dpi=100, sharex=True)
+    x = np.arange(len(rows))
+    ax.bar(x - 0.2, [r["rover_precision"] for r in rows], 0.4, label="precision (no bar: nothing accepted)")
+    ax.bar(x + 0.2, [r["rover_recall"] for r in rows], 0.4, label="recall")
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("ROVER decisions")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7, loc="lower left")
+    for key, lab, m in (("rover+lf", "ROVER, loop_fusion back end", "o"), ("rover+lm", "ROVER, gtsam LM", "s"),
+                        ("accept_all+lf", "accept-all, loop_fusion", "x"), ("accept_all+lm", "accept-all, LM", "+")):
+        ref = "ate_true_only_lf" if key.endswith("lf") else "ate_true_only_lm"
+        bx.plot(x, [methods.ratio(r[f"ate_{key}"], r[ref]) for r in rows], m, label=lab)
+    bx.axhline(1.0, color="k", lw=0.8)
+    bx.set_yscale("log")
+    bx.set_ylabel("ATE / true-only ATE\n(same back end)")
+    bx.set_xticks(x)
+    bx.set_xticklabels([r["case"] for r in rows], rotation=60, ha="right", fontsize=7)
+    bx.grid(alpha=0.3, which="both", axis="y")
+    bx.legend(fontsize=7)
+    metrics.save_figure(fig, path)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="CI: room at sigma 0.05 and 0.15, 40 + 40 candidates")
-    ap.add_argument("--out", default=os.path.join(bench.RESULTS, "poc"))
-    ap.add_argument("--threshold", type=float, help="sequential decisions (default: config/rover_indoor.yaml)")
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
+    bench.family_arguments(ap, "poc")
+    ap.add_argument("--snapshots", type=int, default=10, help="K of the temporal ATE")
     a = ap.parse_args(argv)
-    params = bench.defaults("indoor")
-    if a.threshold is not None:
-        params["threshold"] = a.threshold
-    cases = [("room", 0.05), ("room", 0.15)] if a.quick else [(n, s) for n in SCENES for s in SIGMAS]
-    n = 40 if a.quick else 100
+    cases = bench.select_cases("poc", a)
     os.makedirs(a.out, exist_ok=True)
-    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(lambda c: run_case(c[0], c[1], n, a.out, params), cases))
-    rows = [r for r, _ in results]
-    title = (f"PoC: {n} true + {n} false candidates per case, seed 0; sequential decisions at "
-             f"{params['threshold']:g} m, innovation gate {params['max_innovation']:g} m + "
-             f"{params['max_innovation_per_metre']:g} x path")
-    bench.report(rows, COLUMNS, title, a.out, "poc.csv")
+    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
+        results = list(pool.map(run_case, [(c, a.out, a.snapshots) for c in cases]))
+    case_rows = [r for r, _, _ in results]
+    summary = [x for _, rows, _ in results for x in rows]
+    bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
+    bench.write_csv(case_rows, os.path.join(a.out, "cases.csv"))
+    ind, outd = bench.defaults("indoor"), bench.defaults("outdoor")
+    notes = [f"split: {a.split}{' (quick)' if a.quick else ''}; cases and seeds: roverlib/splits.py",
+             f"ROVER at the shipped defaults: indoor {ind['threshold']:g} m, gate {ind['max_innovation']:g} m + "
+             f"{ind['max_innovation_per_metre']:g} x path; outdoor {outd['threshold']:g} m, gate "
+             f"{outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path; 4-DoF; time budget lifted",
+             f"LM back end: drift model {drift_model.INDOOR} (indoor) / {drift_model.OUTDOOR} (outdoor)",
+             "P '-': nothing accepted; ATE/tATE RMSE [m], SE(3)-aligned"] + \
+        [f"{c.name}: {c.notes}" for c in cases if c.notes]
+    bench.report_tables([("Decisions (ROVER, sequential, shipped defaults)", case_rows, CASE_COLUMNS),
+                         ("Trajectories: ATE [m] per back end (LF = loop_fusion's, LM = gtsam LM)", case_rows,
+                          TRAJ_COLUMNS)], a.out, notes)
     for p in ("oracle", "none"):
-        panels = []
-        for name in dict.fromkeys(c[0] for c in cases):
-            panels.append((f"{name} ({p})", [(f"sigma {r['sigma']:g}", cv[p]) for r, cv in results
-                                             if r["scene"] == name]))
-        metrics.plot_pr_grid(panels, os.path.join(a.out, f"pr_{p}.png"), ncols=3,
-                             suptitle=f"PoC precision-recall, protocol {p} (positives: true loops)")
-    print(f"wrote {a.out}/poc.csv, summary.md, pr_oracle.png, pr_none.png")
+        panels = [(f"{r['case']} ({p})", [("ROVER score", cv[p])]) for r, _, cv in results if cv[p]["recall"].size]
+        if panels:
+            metrics.plot_pr_grid(panels, os.path.join(a.out, f"pr_{p}.png"), ncols=5,
+                                 suptitle=f"Simulated scenes, precision-recall of the score, protocol {p}")
+    plot(case_rows, os.path.join(a.out, "poc.png"))
+    print(f"wrote {a.out}/summary.csv, cases.csv, summary.md, pr_oracle.png, pr_none.png, poc.png")
     return 0
 
 

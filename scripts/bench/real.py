@@ -1,152 +1,122 @@
 #!/usr/bin/env python3
-"""Real drift: EuRoC MH_01/03/05 stereo VIO, the three MH_04 monocular VIO trials and KITTI 09
-visual odometry (../shared/data), keyframes from the estimate, labelled candidates from the
-ground truth (roverlib/real_data.py, seed 0).
+"""Real drift: keyframes from real VIO/VO runs (../shared/data: EuRoC stereo and monocular VIO,
+KITTI 09 visual odometry), labelled candidates from their ground truth (roverlib/real_data.py):
+far-apart false candidates, and near look-alikes (1.5 m indoors, 3 m outdoors, sideways,
+vertically or along the heading) in rows with a row before the first true loop. Tuning and
+test sequences: roverlib/splits.py (never the same sequence on both sides).
 
-  ./scripts/bench.sh real [--quick] [--snapshots 10] [--jobs 2] [--out results/real]
+  ./scripts/bench.sh real [--split test|tuning] [--quick] [--cases A,B] [--snapshots 10]
+                          [--time-limit 600] [--jobs 2] [--out results/real]
 
-Each sequence is replayed with rover_replay at its default configuration (EuRoC: indoor,
-4-DoF, config/rover_indoor.yaml; KITTI: outdoor, 6-DoF, config/rover_outdoor.yaml):
-  oracle, none   AP and MR of the scores, innovation gate off (as in the PoC benchmark);
-  sequential     the product (threshold and innovation gate of the environment's YAML):
-                 precision/recall of its decisions, and the trajectories:
-                 ATE and tATE of odometry only, loop_fusion with every candidate (accept-all),
-                 loop_fusion with the verified loops, and loop_fusion with only the true loops
-                 (the oracle run: what a perfect verifier gets).
-tATE (temporal ATE): the mean ATE of what the system showed at --snapshots evenly spaced times
-(after 1/K, 2/K, .. of the keyframes), each against the ground truth of the keyframes it had by
-then: a false loop that wrecked the map for a while counts even if later loops repaired it.
-ATE: evo, positions, SE(3) Umeyama alignment. The trial solve's 200 ms time budget (wall-clock:
-on a loaded machine it fires at random) is lifted for EuRoC, whose verifications take
-milliseconds (">200ms" reports the share that took longer). KITTI 09 runs twice: with the
-default budget (6-DoF solves over ~1200 keyframes exceed it: rejected, fail closed) and with
-the budget lifted (labelled "no budget").
-Writes real.csv, summary.md, pr_real.png, ate_real.png into --out. --quick (CI): MH_01 only."""
+Per case, on the same candidates in the same order (roverlib/methods.py):
+  ROVER        rover_replay, sequential, at the environment's shipped YAML (EuRoC indoor 4-DoF,
+               KITTI outdoor 6-DoF), time budget lifted (">200ms": share that would have failed
+               closed); AP/MR of its score (gate off; protocols oracle and none, as the paper);
+  accept-all   every candidate;
+  PCM, IPC     incremental peers (roverlib/peers.py), covariances from the drift model;
+  GNC, DCS     gtsam batch robust back ends, under --time-limit;
+every selection solved with loop_fusion's back end (LF) and gtsam LM, each against its own
+true-only solution; ATE and tATE by evo (SE(3)).
+Writes summary.csv (roverlib.bench.SUMMARY_COLUMNS), cases.csv, summary.md, pr_real.png,
+real.png into --out."""
 import argparse
 import os
 import sys
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+from roverlib import bench, drift_model, methods, metrics, problem, scenario
 
-from roverlib import bench, metrics, real_data, scenario  # noqa: E402
-
-SEQUENCES = ("euroc_mh01", "euroc_mh03", "euroc_mh05", "euroc_mh04_mono0", "euroc_mh04_mono1",
-             "euroc_mh04_mono2", "kitti_09")
-COLUMNS = [("case", "sequence", ""), ("keyframes", "kf", "d"), ("true", "true", "d"), ("false", "false", "d"),
-           ("ap_oracle", "AP oracle", ".4f"), ("mr_oracle", "MR oracle", ".2f"),
-           ("ap_none", "AP none", ".4f"), ("mr_none", "MR none", ".2f"),
-           ("threshold", "thr [m]", "g"), ("precision", "P", ".2f"), ("recall", "R", ".2f"),
-           ("gated", "gated", "d"), ("not_scored", "no score", "d"), ("over_200ms", ">200ms", ".2f"),
-           ("ate_odometry", "ATE odo", ".3f"), ("ate_accept_all", "ATE all", ".3f"),
-           ("ate_verified", "ATE verified", ".3f"), ("ate_true_only", "ATE true-only", ".3f"),
-           ("tate_odometry", "tATE odo", ".3f"), ("tate_accept_all", "tATE all", ".3f"),
-           ("tate_verified", "tATE verified", ".3f"), ("tate_true_only", "tATE true-only", ".3f"),
-           ("targets", "P=1 / ATE<=all", "")]
+SELECTIONS = ("rover", "pcm", "ipc", "gnc", "dcs")
+CASE_COLUMNS = [("case", "case", ""), ("keyframes", "kf", "d"), ("true", "true", "d"), ("false", "false", "d"),
+                ("threshold", "thr [m]", "g"), ("ap_oracle", "AP oracle", ".3f"), ("mr_oracle", "MR oracle", ".2f"),
+                ("ap_none", "AP none", ".3f"), ("mr_none", "MR none", ".2f"), ("rover_reasons", "ROVER verdicts", ""),
+                ("rover_over_200ms", ">200ms", ".2f"), ("pcm_reasons", "PCM", ""), ("ipc_reasons", "IPC", ""),
+                ("limits", "time limit hit", "")]
 
 
-def cases(quick):
-    out = []
-    for name in (SEQUENCES[:1] if quick else SEQUENCES):
-        if name.startswith("kitti"):
-            out.append((name, name + " (200 ms budget)", []))
-            out.append((name, name + " (no budget)", ["--time_budget_ms", 0]))
-        else:
-            out.append((name, name, ["--time_budget_ms", 0]))
-    return out
-
-
-def run_case(case, out, snapshots, s):
-    name, label, extra = case
-    d = os.path.join(out, "scenarios", name)
+def run_case(job):
+    case, out, snapshots, time_limit = job
+    s = case.build()
     mode, alignment, env = s.meta["mode"], s.meta["alignment"], s.meta["environment"]
     params = bench.defaults(env)
-    threshold = params["threshold"]
-    args = ["--mode", mode, "--alignment", alignment] + extra
-    tag = label.replace(" ", "_").replace("(", "").replace(")", "")
-    row = {"case": label, "sequence": name, "keyframes": len(s.keyframes), "true": s.meta["true_candidates"],
-           "false": s.meta["false_candidates"], "mode": mode, "threshold": threshold}
-    labels = os.path.join(d, "candidates.csv")
+    d = os.path.join(out, "scenarios", case.name)
+    scenario.write(s, d)
+    row = {"threshold": params["threshold"]}
     curves = {}
-    runs = {}
-    for p in ("oracle", "none", "sequential"):
-        decide = bench.decision_args(params) if p == "sequential" else ["--threshold", threshold] + bench.GATE_OFF
-        runs[p] = bench.replay(d, os.path.join(out, "runs", f"{tag}_{p}"), p, args + decide,
-                               snapshots=snapshots if p in ("oracle", "sequential") else 0)
-        j = bench.labelled(runs[p], labels)
-        if p == "sequential":
-            dm = metrics.decision_metrics(j["label"], j["accepted"])
-            row.update(precision=dm["precision"], recall=dm["recall"], tp=dm["tp"], fp=dm["fp"], fn=dm["fn"])
-            row["gated"] = int(sum(r == "innovation_above_bound" for r in j["reason"]))
-            row["not_scored"] = int(sum(r not in metrics.SCORED_REASONS for r in j["reason"])) - row["gated"]
-            row["time_budget_exceeded"] = int(sum(r == "time_budget_exceeded" for r in j["reason"]))
-            row["over_200ms"] = sum(float(r["elapsed_ms"]) > 200.0 for r in j["rows"]) / max(1, len(j["rows"]))
-        else:
-            r = metrics.ranking_metrics(j["label"], j["score"])
-            row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
-            curves[p] = r
-    seq = bench.trajectory_errors(runs["sequential"], "se3")
-    orc = bench.trajectory_errors(runs["oracle"], "se3", names=("loop_fusion_verified",))
-    for key, (a, t) in (("odometry", seq["odometry"]), ("accept_all", seq["loop_fusion_accept_all"]),
-                        ("verified", seq["loop_fusion_verified"]), ("verifier_estimate", seq["verified"]),
-                        ("true_only", orc["loop_fusion_verified"])):
-        row[f"ate_{key}"], row[f"tate_{key}"] = a, t
-    row["targets"] = ("met" if row["precision"] >= 1.0 else "UNMET") + " / " + \
-        ("met" if row["ate_verified"] <= row["ate_accept_all"] + 1e-9 else "UNMET")
-    return row, curves
+    for p in ("oracle", "none"):
+        run = bench.replay(d, os.path.join(out, "runs", case.name, p), p,
+                           ["--mode", mode, "--alignment", alignment, "--threshold", params["threshold"],
+                            "--time_budget_ms", 0] + bench.GATE_OFF)
+        j = bench.labelled(run, os.path.join(d, "candidates.csv"))
+        r = metrics.ranking_metrics(j["label"], j["score"])
+        row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
+        curves[p] = r
+    prob = problem.from_scenario(s, drift_model.MODELS[env], mode)
+    info, rows = methods.evaluate(case, d, prob, ["--alignment", alignment], params, out, snapshots=snapshots,
+                                  time_limit=time_limit)
+    row.update(info)
+    print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
+                                         if r["method"] in ("rover+lf", "pcm+lf", "ipc+lf", "gnc", "dcs")), flush=True)
+    return row, rows, curves
 
 
-def plot_ate(rows, path):
+def plot(rows, path):
+    """Per case: ATE over the true-only ATE of the same back end, every method."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
-    keys = [("odometry", "odometry only"), ("accept_all", "accept-all"), ("verified", "verified (ROVER)"),
-            ("true_only", "true loops only")]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), dpi=100)
+    fig, axes = plt.subplots(1, 2, figsize=(max(10.0, 0.9 * len(rows) + 4), 4.6), dpi=100, sharey=True)
     x = np.arange(len(rows))
-    w = 0.8 / len(keys)
-    for ax, metric in zip(axes, ("ate", "tate")):
-        for k, (key, lab) in enumerate(keys):
-            ax.bar(x + (k - len(keys) / 2 + 0.5) * w, [r[f"{metric}_{key}"] for r in rows], w, label=lab)
+    for ax, backend in zip(axes, ("lf", "lm")):
+        keys = [f"{m}+{backend}" for m in ("accept_all", "rover", "pcm", "ipc")] + \
+            (["gnc", "dcs"] if backend == "lm" else [])
+        w = 0.8 / len(keys)
+        for k, key in enumerate(keys):
+            ax.bar(x + (k - len(keys) / 2 + 0.5) * w, [r.get(f"{key}:ratio", np.nan) for r in rows], w,
+                   label=methods.NAMES[key.split("+")[0]])
+        ax.axhline(1.0, color="k", lw=0.8)
         ax.set_yscale("log")
         ax.set_xticks(x)
-        ax.set_xticklabels([r["case"].replace(" (", "\n(") for r in rows], fontsize=7, rotation=20)
-        ax.set_ylabel(f"{'ATE' if metric == 'ate' else 'temporal ATE'} RMSE [m]")
-        ax.grid(alpha=0.3, axis="y")
+        ax.set_xticklabels([r["case"] for r in rows], rotation=40, ha="right", fontsize=7)
+        ax.set_title("loop_fusion's back end" if backend == "lf" else "gtsam LM (drift model)", fontsize=9)
+        ax.grid(alpha=0.3, axis="y", which="both")
         ax.legend(fontsize=7)
+    axes[0].set_ylabel("ATE / true-only ATE (same back end)")
     metrics.save_figure(fig, path)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="CI: EuRoC MH_01 only")
-    ap.add_argument("--snapshots", type=int, default=10, help="k of the temporal ATE")
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
-    ap.add_argument("--out", default=os.path.join(bench.RESULTS, "real"))
+    bench.family_arguments(ap, "real")
+    ap.add_argument("--snapshots", type=int, default=10, help="K of the temporal ATE")
     a = ap.parse_args(argv)
+    cases = bench.select_cases("real", a)
     os.makedirs(a.out, exist_ok=True)
-    todo = cases(a.quick)
-    # the two KITTI cases share one scenario: made once, before running in parallel
-    scenarios = {}
-    for name in dict.fromkeys(c[0] for c in todo):
-        scenarios[name] = real_data.make_real(name, seed=0)
-        scenario.write(scenarios[name], os.path.join(a.out, "scenarios", name))
-    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(lambda c: run_case(c, a.out, a.snapshots, scenarios[c[0]]), todo))
-    rows = [r for r, _ in results]
+    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
+        results = list(pool.map(run_case, [(c, a.out, a.snapshots, a.time_limit) for c in cases]))
+    summary = [x for _, rows, _ in results for x in rows]
+    bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
+    wide = methods.wide_rows([r for r, _, _ in results], summary)
+    bench.write_csv(wide, os.path.join(a.out, "cases.csv"))
     ind, outd = bench.defaults("indoor"), bench.defaults("outdoor")
-    title = (f"Real drift, default configurations (EuRoC indoor {ind['threshold']:g} m, gate "
-             f"{ind['max_innovation']:g} m + {ind['max_innovation_per_metre']:g} x path, 4-DoF; KITTI outdoor "
-             f"{outd['threshold']:g} m, gate {outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path, "
-             f"6-DoF), seed 0; "
-             f"ATE/tATE [m] (evo, SE(3), tATE over {a.snapshots} times)")
-    bench.report(rows, COLUMNS, title, a.out, "real.csv")
-    panels = [(r["case"], [(p, cv[p]) for p in ("oracle", "none")]) for r, cv in results]
-    metrics.plot_pr_grid(panels, os.path.join(a.out, "pr_real.png"), ncols=4,
-                         suptitle="Real drift: precision-recall of the scores (positives: true loops)")
-    plot_ate(rows, os.path.join(a.out, "ate_real.png"))
-    print(f"wrote {a.out}/real.csv, summary.md, pr_real.png, ate_real.png")
+    notes = [f"split: {a.split}{' (quick)' if a.quick else ''}; sequences and seeds: roverlib/splits.py",
+             f"ROVER at the shipped defaults: EuRoC indoor {ind['threshold']:g} m, gate {ind['max_innovation']:g} m + "
+             f"{ind['max_innovation_per_metre']:g} x path, 4-DoF; KITTI outdoor {outd['threshold']:g} m, gate "
+             f"{outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path, 6-DoF; time budget lifted",
+             f"PCM, IPC, GNC, DCS and the LM back end: drift model {drift_model.INDOOR} / {drift_model.OUTDOOR}",
+             f"time limit per baseline and case: {a.time_limit:g} s",
+             "P '-': nothing accepted; TP/FP/FN of PCM: its final clique; ATE/tATE RMSE [m], SE(3)-aligned; "
+             "batch methods (GNC, DCS) have no tATE"] + [f"{c.name}: {c.notes}" for c in cases]
+    bench.report_tables([("Cases", wide, CASE_COLUMNS),
+                         ("Decisions", wide, methods.decision_columns(SELECTIONS)),
+                         ("ATE [m]", wide, methods.trajectory_columns(SELECTIONS, "ate")),
+                         ("tATE [m]", wide, methods.trajectory_columns(SELECTIONS, "tate"))], a.out, notes)
+    panels = [(r["case"], [(p, cv[p]) for p in ("oracle", "none") if cv[p]["recall"].size]) for r, _, cv in results]
+    metrics.plot_pr_grid([p for p in panels if p[1]], os.path.join(a.out, "pr_real.png"), ncols=4,
+                         suptitle="Real drift: precision-recall of the ROVER score (positives: true loops)")
+    plot(wide, os.path.join(a.out, "real.png"))
+    print(f"wrote {a.out}/summary.csv, cases.csv, summary.md, pr_real.png, real.png")
     return 0
 
 
