@@ -157,10 +157,14 @@ def _real():
                              notes=f"false: places {far} apart", name=name, seed=seed))
             first = ("lateral", "vertical", "along")[i % 3]
             offset = 3.0 if outdoor else 1.5
+            # KITTI 09 revisits one place, at its end, where its look-alikes are too: rows there
+            # (or a row before it) would take the queries of every true loop
+            rows = 1 if outdoor else 3
             out.append(_case("real", split, f"{name}_near_{first}", env,
-                             notes=f"false: look-alikes {offset:g} m away ({first} first), rows of 3, a row first",
+                             notes=f"false: look-alikes {offset:g} m away ({first} first)" +
+                             ("" if outdoor else ", rows of 3, a row before the first true loop"),
                              name=name, seed=seed + 1,
-                             lookalike=(("early", True), ("first", first), ("offset", offset), ("rows", 3))))
+                             lookalike=(("early", not outdoor), ("first", first), ("offset", offset), ("rows", rows))))
     return out
 
 
