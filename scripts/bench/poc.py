@@ -118,7 +118,8 @@ def main(argv=None):
              f"LM back end: drift model {drift_model.INDOOR} (indoor) / {drift_model.OUTDOOR} (outdoor)",
              "P '-': nothing accepted; ATE/tATE RMSE [m], SE(3)-aligned"] + \
         [f"{c.name}: {c.notes}" for c in cases if c.notes]
-    bench.report_tables([("Decisions (ROVER, sequential, shipped defaults)", case_rows, CASE_COLUMNS),
+    bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
+                         ("Decisions (ROVER, sequential, shipped defaults)", case_rows, CASE_COLUMNS),
                          ("Trajectories: ATE [m] per back end (LF = loop_fusion's, LM = gtsam LM)", case_rows,
                           TRAJ_COLUMNS)], a.out, notes)
     for p in ("oracle", "none"):

@@ -137,7 +137,8 @@ def main(argv=None):
              "P '-': nothing accepted; TP/FP/FN of PCM: its final clique; ATE/tATE RMSE [m], SE(3)-aligned; "
              "batch methods (GNC, DCS) have no tATE"] + \
         [f"{n}: {graph_and_truth(n)[0].n} vertices, reference: {graph_and_truth(n)[2]}" for n in graphs]
-    bench.report_tables([("Cases", wide, CASE_COLUMNS),
+    bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
+                         ("Cases", wide, CASE_COLUMNS),
                          ("Decisions", wide, methods.decision_columns(SELECTIONS)),
                          ("ATE [m]", wide, methods.trajectory_columns(SELECTIONS, "ate")),
                          ("tATE [m]", wide, methods.trajectory_columns(SELECTIONS, "tate"))], a.out, notes)

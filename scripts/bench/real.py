@@ -108,7 +108,8 @@ def main(argv=None):
              f"time limit per baseline and case: {a.time_limit:g} s",
              "P '-': nothing accepted; TP/FP/FN of PCM: its final clique; ATE/tATE RMSE [m], SE(3)-aligned; "
              "batch methods (GNC, DCS) have no tATE"] + [f"{c.name}: {c.notes}" for c in cases]
-    bench.report_tables([("Cases", wide, CASE_COLUMNS),
+    bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
+                         ("Cases", wide, CASE_COLUMNS),
                          ("Decisions", wide, methods.decision_columns(SELECTIONS)),
                          ("ATE [m]", wide, methods.trajectory_columns(SELECTIONS, "ate")),
                          ("tATE [m]", wide, methods.trajectory_columns(SELECTIONS, "tate"))], a.out, notes)

@@ -241,3 +241,51 @@ def trajectory_columns(selections, metric="ate"):
                 continue
             cols.append((f"{m}+{backend}:{metric}", f"{backend.upper()} {NAMES[m]}", ".2f"))
     return cols
+
+
+POOLED_COLUMNS = [("method", "method", ""), ("cases", "cases", "d"), ("tp", "TP", "d"), ("fp", "FP", "d"),
+                  ("fn", "FN", "d"), ("precision", "P", ".3f"), ("recall", "R", ".3f"),
+                  ("cases_with_fp", "cases with FP", "d"), ("cases_p_lt_099", "cases P < 0.99", "d"),
+                  ("cases_r_lt_09", "cases R < 0.9", "d"), ("median_ratio", "median ATE/true-only", ".2f"),
+                  ("worst_ratio", "worst ATE/true-only", ".1f")]
+
+
+def pooled(summary):
+    """Per method over every case of a summary: summed TP/FP/FN and their P/R, how many cases
+    fail a precision or recall bar, and the ATE over the true-only ATE (same back end)."""
+    out = []
+    for method in dict.fromkeys(r["method"] for r in summary):
+        rows = [r for r in summary if r["method"] == method and r["tp"] not in (None, "")]
+        if not rows or method == "odometry":
+            continue
+        tp, fp, fn = (sum(int(r[k]) for r in rows) for k in ("tp", "fp", "fn"))
+        prec = [float(r["precision"]) if r["precision"] not in (None, "") else float("nan") for r in rows]
+        rec = [float(r["recall"]) if r["recall"] not in (None, "") else float("nan") for r in rows]
+        ratios = [ratio(float(r["ate"]), float(r["ate_true_only"])) for r in rows
+                  if r["ate"] not in (None, "") and r["ate_true_only"] not in (None, "")]
+        ratios = [x for x in ratios if math.isfinite(x)]
+        out.append({"method": method, "cases": len(rows), "tp": tp, "fp": fp, "fn": fn,
+                    "precision": tp / (tp + fp) if tp + fp else float("nan"),
+                    "recall": tp / (tp + fn) if tp + fn else float("nan"),
+                    "cases_with_fp": sum(int(r["fp"]) > 0 for r in rows),
+                    "cases_p_lt_099": sum(p < 0.99 for p in prec), "cases_r_lt_09": sum(x < 0.9 for x in rec),
+                    "median_ratio": float(np.median(ratios)) if ratios else float("nan"),
+                    "worst_ratio": max(ratios) if ratios else float("nan")})
+    return out
+
+
+def main(argv=None):
+    """python -m roverlib.methods results/<family>/summary.csv: the pooled table of a run."""
+    import argparse
+    import csv
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("summary")
+    a = ap.parse_args(argv)
+    with open(a.summary) as f:
+        rows = list(csv.DictReader(f))
+    bench.print_table(pooled(rows), POOLED_COLUMNS, f"{a.summary}: pooled over {len({r['case'] for r in rows})} cases")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

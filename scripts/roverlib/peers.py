@@ -7,10 +7,13 @@ PCM  pairwise consistency maximisation (Mangelson et al., ICRA 2018), as Kimera-
      between its two keyframes (squared Mahalanobis distance of the cycle odometry * loop^-1
      under the composed covariances below the chi2 quantile); two such loops are consistent if
      the cycle loop_a^-1 * odometry(match_a, match_b) * loop_b * odometry(query_b, query_a)
-     passes the same test; the accepted set is the maximum clique of that graph, updated as
-     candidates arrive with the incremental heuristic of Kimera-RPGO (Pattabiraman et al.: a
-     clique grown greedily from each new vertex, by degree, replaces the current one only if
-     larger). A loop accepted earlier can leave the set later.
+     passes the same test; the accepted set is the maximum clique of that graph, recomputed as
+     every candidate arrives with the heuristic Kimera-RPGO runs by default (Pattabiraman et al.
+     2015, MaxCliqueHeu: from every vertex whose degree could beat the best clique so far, grow a
+     clique greedily by highest degree; the largest wins, ties go to the one found first).
+     A loop accepted earlier can leave the set later. (Kimera-RPGO's `incremental` variant grows
+     cliques only from the new vertex: measured here, it locks onto an early row of agreeing
+     look-alikes and never lets the later, larger set of true loops in.)
      Odometry covariances between any two keyframes come from the chain in O(1): with C_i the
      covariance of keyframe i relative to keyframe 0 (propagated with the adjoint), the
      covariance of i -> j is C_j - Ad(D^-1) C_i Ad(D^-1)^T, D = P_i^-1 P_j (as Kimera-RPGO).
@@ -134,24 +137,28 @@ class PCM:
             adj[n, :n] = adj[:n, n] = row
             self.adj = adj
             self.loops.append((k, z))
-            grown = self._greedy_clique(n)
-            if len(grown) > len(self.clique):
-                self.clique = grown
+            self.clique = self._max_clique_heuristic()
         return [self.loops[i][0] for i in self.clique]
 
-    def _greedy_clique(self, v):
-        """A clique containing v, grown by highest degree (ties: earliest)."""
+    def _max_clique_heuristic(self):
+        """MaxCliqueHeu over the whole consistency graph (starting from the current clique,
+        which stays a clique when vertices are added)."""
         degree = self.adj.sum(axis=1)
-        clique = [v]
-        cand = self.adj[v].copy()
-        cand &= degree >= len(self.clique)  # cannot be in a clique larger than the current one
-        while cand.any():
-            idx = np.flatnonzero(cand)
-            u = int(idx[np.argmax(degree[idx])])
-            clique.append(u)
-            cand &= self.adj[u]
-            cand[u] = False
-        return sorted(clique)
+        best = list(self.clique)
+        for v in range(len(degree)):
+            if degree[v] < len(best):  # v's cliques have at most degree + 1 vertices
+                continue
+            clique = [v]
+            cand = self.adj[v] & (degree >= len(best))
+            while cand.any():
+                idx = np.flatnonzero(cand)
+                u = int(idx[np.argmax(degree[idx])])
+                clique.append(u)
+                cand &= self.adj[u]
+                cand[u] = False
+            if len(clique) > len(best):
+                best = sorted(clique)
+        return best
 
 
 class IPC:

@@ -1,5 +1,6 @@
 import importlib.util
 import os
+import sys
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 
@@ -10,6 +11,7 @@ def script(relpath):
     path = os.path.join(ROOT, "scripts", relpath)
     spec = importlib.util.spec_from_file_location("script_" + relpath[:-3].replace("/", "_"), path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # so that worker processes (fork) find its functions by name
     spec.loader.exec_module(module)
     return module
 

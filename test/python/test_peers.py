@@ -151,3 +151,18 @@ def test_lm_prefix_solves_the_keyframes_so_far():
     assert len(full) == p.n and len(prefix) == 50
     truth = metrics.trajectory(np.arange(50.0), [T[:3, 3] for T in p.odometry_poses()[:50]])
     assert metrics.ate(truth, metrics.trajectory(np.arange(50.0), [T[:3, 3] for T in prefix])) < 1e-3
+
+
+def test_pcm_finds_the_larger_true_set_after_early_rows_of_agreeing_look_alikes():
+    """EuRoC MH_05 with near look-alikes (a test case of the real family): rows of agreeing
+    look-alikes arrive first, 22 true loops later. The maximum clique must end on the true
+    loops; grown only from each new vertex (Kimera-RPGO's incremental variant) it stayed on 18
+    look-alikes and took no true loop."""
+    from roverlib import splits
+    (case,) = [c for c in splits.cases("real", "test") if c.name == "euroc_mh05_near_lateral"]
+    try:
+        p = problem.from_scenario(case.build(), drift_model.INDOOR)
+    except FileNotFoundError as e:
+        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
+    d = metrics.decision_metrics(p.labels(), peers.run("pcm", p)["accepted"])
+    assert d["tp"] >= 20 and d["tp"] > d["fp"], d
