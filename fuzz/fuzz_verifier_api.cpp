@@ -7,6 +7,7 @@
 //   - an accepted verdict is either `accepted` (converged, score <= threshold) or
 //     `no_trajectory_prior` (by policy); a rejected one never says `accepted`;
 //   - every estimate stays finite.
+#include "rover_loop_fusion/core/geometry.h"
 #include "rover_loop_fusion/core/verifier.h"
 
 #include <fuzzer/FuzzedDataProvider.h>
@@ -77,7 +78,7 @@ LoopCandidate candidate(FuzzedDataProvider& in, const std::vector<int64_t>& know
   c.match_index = pick();
   c.relative_t = Eigen::Vector3d(value(in, 25), value(in, 25), value(in, 3));
   c.relative_q = rotation(in);
-  c.relative_yaw = in.ConsumeBool() ? value(in, 1) : std::atan2(2 * c.relative_q.w() * c.relative_q.z(), 1 - 2 * c.relative_q.z() * c.relative_q.z());
+  c.relative_yaw = in.ConsumeBool() ? value(in, 1) : yawOf(c.relative_q);
   c.inliers = in.ConsumeIntegral<int>();
   return c;
 }
@@ -157,7 +158,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       case 5: {  // commit whatever
         const LoopCandidate c = candidate(in, known);
         const Snapshot before = snapshot(v);
-        const Status st = v.commit(c, in.ConsumeBool());
+        const Status st = v.commit(c);
         if (st.ok) ++stats.commits;
         else CHECK(snapshot(v) == before);
         break;

@@ -1,8 +1,16 @@
 #!/usr/bin/env bash
-# Shared set-up for scripts/demo.sh and scripts/test.sh: installs what is missing from the
-# distribution's packages, then builds this package in a catkin workspace kept in .ws/
-# (git-ignored) inside the clone. Safe to run again: a built workspace is only rebuilt
-# incrementally. Source it; it sets ROVER_ROOT and ROVER_WS and sources devel/setup.bash.
+# Shared set-up for scripts/demo.sh and scripts/test.sh: installs the Debian 12 packages this
+# package needs, then builds it in a catkin workspace kept in .ws/ (git-ignored) inside the
+# clone. Safe to run again: only missing packages are installed and a built workspace is only
+# rebuilt incrementally.
+#
+#   source scripts/setup.sh            install, build, source devel/setup.bash; sets ROVER_ROOT, ROVER_WS
+#   scripts/setup.sh --print-packages  print the Debian packages it installs, one a line; change nothing
+#
+# What it installs is derived, never listed here: every dependency of package.xml (rosdep keys)
+# mapped through scripts/debian12-packages.yaml, plus that file's toolchain and hardening lists.
+# test/python/test_dependencies.py checks the two against each other.
+# Ubuntu 20.04 + ROS Noetic: rosdep install --from-paths . --ignore-src (docs/testing.md).
 set -euo pipefail
 
 ROVER_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -12,20 +20,47 @@ export ROVER_ROOT ROVER_WS
 # breaks catkin and pluginlib's CMake hooks.
 export PATH="/usr/bin:$PATH"
 
-# Debian 12 ships ROS 1 as ros-*/lib*-dev/python3-ros* packages; Ubuntu 20.04 users have
-# ROS Noetic from packages.ros.org (see README) and get the rest from apt as well.
-ROVER_DEPS=(
-  catkin ros-core-dev pluginlib-dev libtf2-dev libtf2-ros-dev libtf2-eigen-dev
-  libceres-dev libeigen3-dev libopencv-dev libgtest-dev googletest
-  python3-nav-msgs
-  python3-rosbag python3-roslaunch python3-rostest python3-rosnode python3-rostopic
-  python3-numpy python3-pytest rosbash
-  clang-14 libclang-rt-14-dev
-)
+# The Debian packages for the package in directory $1 (default: this clone), sorted. Fails,
+# naming the key, when a package.xml dependency has no entry in the mapping or a mapping line
+# cannot be read. Plain bash and sed: it runs before anything is installed.
+rover_debian_packages() {
+  local root="${1:-$ROVER_ROOT}"
+  local xml="$root/package.xml" map="$root/scripts/debian12-packages.yaml"
+  local line section="" n=0 bad=0 key
+  local -A by_key=()
+  local pkgs=()
+  while IFS= read -r line || [ -n "$line" ]; do
+    n=$((n + 1))
+    line="${line%%#*}"
+    [[ "$line" =~ ^[[:space:]]*$ ]] && continue
+    if [[ "$line" =~ ^([a-z_]+):[[:space:]]*$ ]]; then
+      section="${BASH_REMATCH[1]}"
+    elif [[ "$line" =~ ^([a-z_]+):[[:space:]]*\[([^]]*)\][[:space:]]*$ ]]; then
+      section=""
+      pkgs+=(${BASH_REMATCH[2]//,/ })
+    elif [ "$section" = keys ] && [[ "$line" =~ ^[[:space:]]+([A-Za-z0-9_.+-]+):[[:space:]]*\[([^]]*)\][[:space:]]*$ ]]; then
+      by_key["${BASH_REMATCH[1]}"]="${BASH_REMATCH[2]//,/ }"
+    else
+      echo "[rover] $map:$n: cannot read '$line' (expected 'key: [package, ...]' on one line)" >&2
+      bad=1
+    fi
+  done < "$map"
+  for key in $(sed -n 's|.*<\([a-z_]*depend\)\( [^>]*\)\{0,1\}>[[:space:]]*\([^<[:space:]]*\)[[:space:]]*</\1>.*|\3|p' "$xml"); do
+    if [[ -v by_key["$key"] ]]; then
+      pkgs+=(${by_key["$key"]})
+    else
+      echo "[rover] package.xml depends on '$key', which has no Debian 12 packages in $map" >&2
+      bad=1
+    fi
+  done
+  [ "$bad" -eq 0 ] || return 1
+  printf '%s\n' "${pkgs[@]}" | sort -u
+}
 
 rover_install_deps() {
-  local missing=()
-  for p in "${ROVER_DEPS[@]}"; do
+  local wanted missing=() p
+  wanted="$(rover_debian_packages)"
+  for p in $wanted; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
@@ -53,5 +88,9 @@ rover_build() {
   set -u
 }
 
+if [ "${BASH_SOURCE[0]}" = "$0" ] && [ "${1:-}" = "--print-packages" ]; then
+  rover_debian_packages
+  exit
+fi
 rover_install_deps
 rover_build

@@ -5,10 +5,10 @@
 // the core uses the names below and never spells either API directly.
 #pragma once
 
+#include "rover_loop_fusion/core/geometry.h"
+
 #include <ceres/ceres.h>
 #include <ceres/version.h>
-
-#include <cmath>
 
 #if (CERES_VERSION_MAJOR > 2) || (CERES_VERSION_MAJOR == 2 && CERES_VERSION_MINOR >= 1)
 #define ROVER_CERES_HAS_MANIFOLD 1
@@ -19,8 +19,6 @@
 namespace rover_loop_fusion {
 namespace core {
 namespace compat {
-
-inline double wrapAngle(double a) { return std::atan2(std::sin(a), std::cos(a)); }
 
 #if ROVER_CERES_HAS_MANIFOLD
 using ParameterManifold = ceres::Manifold;

@@ -12,15 +12,24 @@
 //   6-DoF edge i -> j, parameters q_i [w,x,y,z], t_i, q_j, t_j (loop_fusion's RelativeRTError):
 //     r[0:3] = (R_i^T (t_j - t_i) - t_ij) / t_var
 //     r[3:6] = 2 vec(q_ij^-1 * (q_i^-1 q_j)) / q_var
+//
+// Every edge can carry an information matrix Lambda of its residual r (as defined above, 4x4 or
+// 6x6); the residual handed to Ceres is then L r with L^T L = Lambda, so that the cost is
+// r^T Lambda r / 2. Unit information (loop_fusion's weighting, the default) leaves r exactly
+// as above and costs nothing.
 #pragma once
+
+#include "rover_loop_fusion/core/geometry.h"
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
 #include <cmath>
+#include <memory>
 
 namespace rover_loop_fusion {
 namespace core {
@@ -32,47 +41,17 @@ constexpr double kLoopYawWeight = 0.1;
 constexpr double kSixDofTranslationSigma = 0.1;
 constexpr double kSixDofRotationSigma = 0.01;
 
-/// Wraps an angle difference to [-pi, pi] (one turn, as the differences here are small).
-template <typename T>
-T wrapAngleDiff(const T& a) {
-  if (a > T(M_PI)) return a - T(2.0 * M_PI);
-  if (a < T(-M_PI)) return a + T(2.0 * M_PI);
-  return a;
-}
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
-/// R = Rz(yaw) * Ry(pitch) * Rx(roll), row-major, radians (the Z-Y-X convention of
-/// loop_fusion's Utility::ypr2R).
-template <typename T>
-void yawPitchRollToRotation(const T& yaw, const T& pitch, const T& roll, T R[9]) {
-  using std::cos;
-  using std::sin;
-  const T cy = cos(yaw), sy = sin(yaw), cp = cos(pitch), sp = sin(pitch), cr = cos(roll),
-          sr = sin(roll);
-  R[0] = cy * cp;
-  R[1] = -sy * cr + cy * sp * sr;
-  R[2] = sy * sr + cy * sp * cr;
-  R[3] = sy * cp;
-  R[4] = cy * cr + sy * sp * sr;
-  R[5] = -cy * sr + sy * sp * cr;
-  R[6] = -sp;
-  R[7] = cp * sr;
-  R[8] = cp * cr;
-}
-
-/// Yaw, pitch, roll (radians, Z-Y-X) of a rotation matrix.
-inline Eigen::Vector3d rotationToYawPitchRoll(const Eigen::Matrix3d& R) {
-  const double yaw = std::atan2(R(1, 0), R(0, 0));
-  const double pitch = std::atan2(-R(2, 0), std::hypot(R(0, 0), R(1, 0)));
-  const double roll = std::atan2(R(2, 1), R(2, 2));
-  return Eigen::Vector3d(yaw, pitch, roll);
-}
-
-inline Eigen::Matrix3d yawPitchRollToRotation(double yaw, double pitch, double roll) {
-  double R[9];
-  yawPitchRollToRotation(yaw, pitch, roll, R);
-  Eigen::Matrix3d M;
-  M << R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8];
-  return M;
+/// L (upper triangular) with L^T L = information; false if it is not symmetric positive
+/// definite and finite. Unit information gives L = I exactly.
+template <int N>
+bool sqrtInformation(const Eigen::Matrix<double, N, N>& information, Eigen::Matrix<double, N, N>* L) {
+  if (!information.allFinite() || !information.isApprox(information.transpose())) return false;
+  const Eigen::LLT<Eigen::Matrix<double, N, N>> llt(information);
+  if (llt.info() != Eigen::Success) return false;
+  *L = llt.matrixU();
+  return true;
 }
 
 class FourDofEdgeError {
@@ -113,9 +92,12 @@ class FourDofEdgeError {
 /// test_cost_functions checks it against the autodiff functor.
 class FourDofEdgeCost : public ceres::SizedCostFunction<4, 1, 3, 1, 3> {
  public:
+  /// `sqrt_information`: L of the residual's information (see the top of this file); none or
+  /// the identity is loop_fusion's weighting.
   FourDofEdgeCost(const Eigen::Vector3d& t_ij, double yaw_ij, double pitch_i, double roll_i,
-                  double yaw_weight)
+                  double yaw_weight, const Eigen::Matrix4d* sqrt_information = nullptr)
       : t_ij_(t_ij), yaw_ij_(yaw_ij), yaw_scale_(kYawResidualScale * yaw_weight) {
+    if (sqrt_information && !sqrt_information->isIdentity(0.0)) L_.reset(new Eigen::Matrix4d(*sqrt_information));
     // R(yaw, pitch, roll)^T = (Ry(pitch) Rx(roll))^T Rz(yaw)^T; the first factor is fixed.
     const Eigen::Matrix3d Rpr = yawPitchRollToRotation(0.0, pitch_i, roll_i);
     RprT_ = Rpr.transpose();
@@ -133,6 +115,7 @@ class FourDofEdgeCost : public ceres::SizedCostFunction<4, 1, 3, 1, 3> {
     Eigen::Map<Eigen::Vector4d> r(residuals);
     r.head<3>() = RT * d - t_ij_;
     r[3] = wrapAngleDiff(yaw_j - yaw_i - yaw_ij_) * yaw_scale_;
+    if (L_) r = *L_ * r.eval();
     if (!jacobians) return true;
     if (jacobians[0]) {  // d r / d yaw_i
       Eigen::Matrix3d dRzT;
@@ -156,6 +139,14 @@ class FourDofEdgeCost : public ceres::SizedCostFunction<4, 1, 3, 1, 3> {
       J.topRows<3>() = RT;
       J.row(3).setZero();
     }
+    if (L_) {
+      for (int k = 0; k < 4; ++k) {
+        if (!jacobians[k]) continue;
+        const int n = k % 2 ? 3 : 1;
+        Eigen::Map<Eigen::Matrix<double, 4, Eigen::Dynamic, Eigen::RowMajor>> J(jacobians[k], 4, n);
+        J = *L_ * J.eval();
+      }
+    }
     return true;
   }
 
@@ -163,14 +154,17 @@ class FourDofEdgeCost : public ceres::SizedCostFunction<4, 1, 3, 1, 3> {
   Eigen::Vector3d t_ij_;
   double yaw_ij_, yaw_scale_;
   Eigen::Matrix3d RprT_;
+  std::unique_ptr<Eigen::Matrix4d> L_;  // null: unit information
 };
 
 class SixDofEdgeError {
  public:
   /// q_ij as [w, x, y, z].
+  /// `sqrt_information`: as for FourDofEdgeCost (none or the identity: loop_fusion's weighting).
   SixDofEdgeError(const Eigen::Vector3d& t_ij, const Eigen::Quaterniond& q_ij, double t_sigma,
-                  double q_sigma)
+                  double q_sigma, const Matrix6d* sqrt_information = nullptr)
       : t_ij_(t_ij), t_sigma_(t_sigma), q_sigma_(q_sigma) {
+    if (sqrt_information && !sqrt_information->isIdentity(0.0)) L_.reset(new Matrix6d(*sqrt_information));
     q_ij_inv_[0] = q_ij.w();
     q_ij_inv_[1] = -q_ij.x();
     q_ij_inv_[2] = -q_ij.y();
@@ -195,20 +189,30 @@ class SixDofEdgeError {
     residuals[3] = T(2.0) * q_err[1] / T(q_sigma_);
     residuals[4] = T(2.0) * q_err[2] / T(q_sigma_);
     residuals[5] = T(2.0) * q_err[3] / T(q_sigma_);
+    if (L_) {
+      T r[6];
+      for (int i = 0; i < 6; ++i) r[i] = residuals[i];
+      for (int i = 0; i < 6; ++i) {
+        residuals[i] = T(0.0);
+        for (int j = 0; j < 6; ++j) residuals[i] += T((*L_)(i, j)) * r[j];
+      }
+    }
     return true;
   }
 
   static ceres::CostFunction* create(const Eigen::Vector3d& t_ij, const Eigen::Quaterniond& q_ij,
                                      double t_sigma = kSixDofTranslationSigma,
-                                     double q_sigma = kSixDofRotationSigma) {
+                                     double q_sigma = kSixDofRotationSigma,
+                                     const Matrix6d* sqrt_information = nullptr) {
     return new ceres::AutoDiffCostFunction<SixDofEdgeError, 6, 4, 3, 4, 3>(
-        new SixDofEdgeError(t_ij, q_ij, t_sigma, q_sigma));
+        new SixDofEdgeError(t_ij, q_ij, t_sigma, q_sigma, sqrt_information));
   }
 
  private:
   Eigen::Vector3d t_ij_;
   double q_ij_inv_[4];
   double t_sigma_, q_sigma_;
+  std::unique_ptr<Matrix6d> L_;  // null: unit information
 };
 
 }  // namespace core

@@ -1,7 +1,6 @@
 #include "rover_loop_fusion/core/types.h"
 
 #include <cmath>
-#include <sstream>
 
 namespace rover_loop_fusion {
 namespace core {
@@ -51,31 +50,24 @@ LoopCandidate candidateFromLoopInfo(int64_t query_index, int64_t match_index,
   return c;
 }
 
-std::string VerifierConfig::validate() const {
-  std::ostringstream e;
-  auto positive = [&](const char* name, double v) {
-    if (!(std::isfinite(v) && v > 0)) e << name << " must be a positive number (got " << v << "); ";
-  };
-  positive("threshold", threshold);
-  positive("loop_huber", loop_huber);
-  positive("max_relative_translation", max_relative_translation);
-  positive("max_relative_yaw", max_relative_yaw);
-  positive("quaternion_tolerance", quaternion_tolerance);
-  positive("function_tolerance", function_tolerance);
-  if (!(std::isfinite(threshold_per_metre) && threshold_per_metre >= 0))
-    e << "threshold_per_metre must be >= 0 (got " << threshold_per_metre << "); ";
-  if (!std::isfinite(max_threshold)) e << "max_threshold must be finite; ";
-  if (!std::isfinite(max_innovation)) e << "max_innovation must be finite; ";
-  if (!(std::isfinite(max_innovation_per_metre) && max_innovation_per_metre >= 0))
-    e << "max_innovation_per_metre must be >= 0 (got " << max_innovation_per_metre << "); ";
-  if (max_iterations < 1) e << "max_iterations must be >= 1 (got " << max_iterations << "); ";
-  if (!std::isfinite(time_budget_ms)) e << "time_budget_ms must be finite; ";
-  if (odometry_neighbours < 1)
-    e << "odometry_neighbours must be >= 1 (got " << odometry_neighbours << "); ";
-  if (window_margin < 0) e << "window_margin must be >= 0 (got " << window_margin << "); ";
-  std::string s = e.str();
-  if (s.size() >= 2) s.resize(s.size() - 2);
-  return s;
+Verdict Verdict::Accept(const LoopCandidate& c, std::string detail, Reason reason) {
+  Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = true;
+  v.reason = reason;
+  v.detail = std::move(detail);
+  return v;
+}
+
+Verdict Verdict::Reject(Reason reason, const LoopCandidate& c, std::string detail) {
+  Verdict v;
+  v.query_index = c.query_index;
+  v.match_index = c.match_index;
+  v.accepted = false;
+  v.reason = reason == Reason::kAccepted ? Reason::kInvalidInput : reason;  // never "rejected: accepted"
+  v.detail = std::move(detail);
+  return v;
 }
 
 }  // namespace core

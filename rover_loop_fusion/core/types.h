@@ -85,9 +85,38 @@ struct Verdict {
   double path_length = std::numeric_limits<double>::quiet_NaN();
   double solve_ms = 0.0;  ///< Ceres time
   double elapsed_ms = 0.0;  ///< whole verify() call
+
+  /// A verdict that lets the candidate's loop in: reason kAccepted, or kNoTrajectoryPrior for a
+  /// candidate accepted by policy (accept_without_prior).
+  static Verdict Accept(const LoopCandidate& candidate, std::string detail,
+                        Reason reason = Reason::kAccepted);
+  /// A verdict that keeps the candidate's loop out, with why (kAccepted is taken as kInvalidInput).
+  static Verdict Reject(Reason reason, const LoopCandidate& candidate, std::string detail);
+};
+
+/// One keyframe of a trajectory, as reported by Verifier::trajectory(), PoseGraph::trajectory()
+/// and the plugins.
+struct TrajectoryPoint {
+  int64_t index = -1;
+  double stamp = 0.0;
+  int sequence = 0;
+  Pose vio;       ///< as handed to addKeyframe (after any sequence anchoring shift)
+  Pose estimate;  ///< the current estimate X (VIO + accepted loops)
+};
+
+/// What one Ceres solve reported.
+struct SolveSummary {
+  bool converged = false;  ///< Ceres' CONVERGENCE
+  bool timed_out = false;  ///< stopped by the time limit
+  bool finite = false;     ///< every parameter of the solution is finite
+  int iterations = 0;      ///< iterations, without Ceres' initial evaluation
+  double solve_ms = 0.0;
+  std::string message;     ///< Ceres' summary message
 };
 
 /// Result of calls that can refuse input (addKeyframe, commit). Never throws.
+/// ok with a message is a warning: the call did what was asked, but something deserves a
+/// WARN in the host's log (the message says what).
 struct Status {
   bool ok = true;
   std::string message;
@@ -98,9 +127,17 @@ struct Status {
     s.message = std::move(msg);
     return s;
   }
+  static Status Warning(std::string msg) {
+    Status s;
+    s.message = std::move(msg);
+    return s;
+  }
+  bool warning() const { return ok && !message.empty(); }
   explicit operator bool() const { return ok; }
 };
 
+/// The verifier's parameters. Every field is a row of the parameter table (core/parameters.h:
+/// its YAML name, unit, range and doc); adding a field means adding its row there.
 struct VerifierConfig {
   Mode mode = Mode::kFourDof;
   Alignment alignment = Alignment::kSE3;
@@ -156,7 +193,8 @@ struct VerifierConfig {
   /// Tolerance on | |q| - 1 | for quaternions handed in.
   double quaternion_tolerance = 1e-3;
 
-  /// Empty when usable; otherwise says which field is wrong and why.
+  /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
+  /// says which fields are wrong and why.
   std::string validate() const;
 };
 

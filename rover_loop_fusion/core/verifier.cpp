@@ -1,15 +1,8 @@
 #include "rover_loop_fusion/core/verifier.h"
 
-#include "rover_loop_fusion/core/alignment.h"
-#include "rover_loop_fusion/core/ceres_compat.h"
-#include "rover_loop_fusion/core/cost_functions.h"
+#include "rover_loop_fusion/core/decision.h"
 
-#include <algorithm>
 #include <chrono>
-#include <cmath>
-#include <deque>
-#include <map>
-#include <queue>
 #include <sstream>
 
 namespace rover_loop_fusion {
@@ -23,732 +16,148 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-/// Parameter storage of one keyframe. 4-DoF uses yaw + t (roll, pitch from the VIO pose);
-/// 6-DoF uses q [w, x, y, z] + t.
-struct State {
-  double t[3] = {0, 0, 0};
-  double yaw = 0;
-  double q[4] = {1, 0, 0, 0};
-};
-
-bool unitQuaternion(const Eigen::Quaterniond& q, double tol) {
-  return q.coeffs().allFinite() && std::abs(q.norm() - 1.0) <= tol;
+/// `decided` with the numbers measured on the way to it (`measured`) and the time taken.
+Verdict withNumbers(Verdict decided, const Verdict& measured, Clock::time_point t0) {
+  decided.score = measured.score;
+  decided.threshold = measured.threshold;
+  decided.converged = measured.converged;
+  decided.iterations = measured.iterations;
+  decided.window_size = measured.window_size;
+  decided.innovation = measured.innovation;
+  decided.path_length = measured.path_length;
+  decided.solve_ms = measured.solve_ms;
+  decided.elapsed_ms = msSince(t0);
+  return decided;
 }
-
-std::string describeIndex(int64_t i) { return std::to_string(static_cast<long long>(i)); }
-
-/// A rigid correction: 4-DoF keeps it to yaw + translation.
-struct Correction {
-  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d t = Eigen::Vector3d::Zero();
-  double yaw = 0;
-};
 
 }  // namespace
 
-struct Verifier::Impl {
-  struct Keyframe {
-    int64_t index;
-    double stamp;
-    int sequence;
-    Pose vio;
-    double yaw, pitch, roll;  // of vio, radians
-  };
-  struct Edge {
-    size_t from, to;  // positions; from is the older keyframe
-    std::shared_ptr<ceres::CostFunction> cost;
-    LoopCandidate loop;  // loops only
-  };
-  struct Pending {
-    bool valid = false;
-    LoopCandidate candidate;
-    uint64_t revision = 0;
-    std::vector<size_t> positions;
-    std::vector<State> states;
-  };
-  /// A trial problem over the window [first, newest] of one component.
-  struct Trial {
-    explicit Trial() : problem(compat::problemOptionsNotOwning()) {}
-    ceres::Problem problem;
-    size_t first = 0;
-    std::vector<size_t> positions;  // window keyframes, increasing
-    std::vector<int> local;         // position - first -> index into positions, or -1
-    std::vector<State> states;      // same order as positions
-    std::deque<State> constants;    // loop endpoints outside the window (stable addresses)
-    std::vector<bool> fixed;
-  };
-
-  const VerifierConfig& cfg;
-  std::vector<Keyframe> kfs;
-  std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's sequence
-  std::vector<State> x;
-  std::vector<Edge> odometry;  // appended in increasing `to`
-  std::vector<Edge> loops;
-  std::map<int, int> seq_parent;     // union-find over sequence ids
-  std::map<int, bool> seq_anchored;  // loop_fusion's sequence_loop
-  std::map<int, Correction> seq_shift;  // applied to incoming poses if anchor_incoming_keyframes
-  std::unique_ptr<ceres::LossFunction> huber;
-  std::unique_ptr<compat::ParameterManifold> angle_manifold;
-  std::unique_ptr<compat::ParameterManifold> quaternion_manifold;
-  Pending pending;
-  uint64_t revision = 0;
-  size_t solves = 0;
-
-  explicit Impl(const VerifierConfig& c)
-      : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
-        angle_manifold(new compat::AngleManifold()),
-        quaternion_manifold(compat::newQuaternionManifold()) {}
-
-  bool fourDof() const { return cfg.mode == Mode::kFourDof; }
-
-  // ---- lookup -------------------------------------------------------------------------
-  bool find(int64_t index, size_t* pos) const {
-    auto it = std::lower_bound(kfs.begin(), kfs.end(), index,
-                               [](const Keyframe& k, int64_t i) { return k.index < i; });
-    if (it == kfs.end() || it->index != index) return false;
-    *pos = static_cast<size_t>(it - kfs.begin());
-    return true;
-  }
-
-  int root(int seq) {
-    auto it = seq_parent.find(seq);
-    if (it == seq_parent.end()) {
-      seq_parent[seq] = seq;
-      return seq;
-    }
-    if (it->second == seq) return seq;
-    const int r = root(it->second);
-    seq_parent[seq] = r;
-    return r;
-  }
-  bool connected(int a, int b) { return root(a) == root(b); }
-
-  // ---- poses and states ---------------------------------------------------------------
-  State stateFromPose(const Pose& p) const {
-    State s;
-    for (int k = 0; k < 3; ++k) s.t[k] = p.t[k];
-    s.yaw = rotationToYawPitchRoll(p.q.toRotationMatrix())[0];
-    const Eigen::Quaterniond q = p.q.normalized();
-    s.q[0] = q.w();
-    s.q[1] = q.x();
-    s.q[2] = q.y();
-    s.q[3] = q.z();
-    return s;
-  }
-
-  Pose poseFromState(const State& s, const Keyframe& kf) const {
-    Pose p;
-    p.t = Eigen::Vector3d(s.t[0], s.t[1], s.t[2]);
-    if (fourDof()) {
-      p.q = Eigen::Quaterniond(yawPitchRollToRotation(s.yaw, kf.pitch, kf.roll));
-    } else {
-      p.q = Eigen::Quaterniond(s.q[0], s.q[1], s.q[2], s.q[3]).normalized();
-    }
-    return p;
-  }
-
-  Eigen::Matrix3d rotationOf(const State& s, const Keyframe& kf) const {
-    return poseFromState(s, kf).q.toRotationMatrix();
-  }
-
-  /// The correction that maps `before` onto `after` (4-DoF: yaw + translation only, like
-  /// loop_fusion's r_drift / t_drift).
-  Correction correctionBetween(const State& before, const State& after, const Keyframe& kf) const {
-    Correction c;
-    if (fourDof()) {
-      c.yaw = compat::wrapAngle(after.yaw - before.yaw);
-      c.R = yawPitchRollToRotation(c.yaw, 0, 0);
-    } else {
-      c.R = rotationOf(after, kf) * rotationOf(before, kf).transpose();
-    }
-    const Eigen::Vector3d tb(before.t[0], before.t[1], before.t[2]);
-    const Eigen::Vector3d ta(after.t[0], after.t[1], after.t[2]);
-    c.t = ta - c.R * tb;
-    return c;
-  }
-
-  State applyCorrection(const Correction& c, const State& s, const Keyframe& kf) const {
-    State o = s;
-    const Eigen::Vector3d t = c.R * Eigen::Vector3d(s.t[0], s.t[1], s.t[2]) + c.t;
-    for (int k = 0; k < 3; ++k) o.t[k] = t[k];
-    if (fourDof()) {
-      o.yaw = compat::wrapAngle(s.yaw + c.yaw);
-    } else {
-      const Eigen::Quaterniond q(c.R * rotationOf(s, kf));
-      o.q[0] = q.w();
-      o.q[1] = q.x();
-      o.q[2] = q.y();
-      o.q[3] = q.z();
-    }
-    return o;
-  }
-
-  Pose applyCorrection(const Correction& c, const Pose& p) const {
-    return Pose(c.R * p.t + c.t, Eigen::Quaterniond(c.R * p.q.toRotationMatrix()));
-  }
-
-  // ---- edges --------------------------------------------------------------------------
-  std::shared_ptr<ceres::CostFunction> odometryCost(const Keyframe& a, const Keyframe& b) const {
-    const Eigen::Vector3d t_ab = a.vio.q.conjugate() * (b.vio.t - a.vio.t);
-    if (fourDof()) {
-      return std::make_shared<FourDofEdgeCost>(t_ab, compat::wrapAngle(b.yaw - a.yaw), a.pitch,
-                                               a.roll, 1.0);
-    }
-    return std::shared_ptr<ceres::CostFunction>(
-        SixDofEdgeError::create(t_ab, a.vio.q.conjugate() * b.vio.q));
-  }
-
-  std::shared_ptr<ceres::CostFunction> loopCost(const LoopCandidate& c, const Keyframe& match) const {
-    if (fourDof()) {
-      return std::make_shared<FourDofEdgeCost>(c.relative_t, c.relative_yaw, match.pitch,
-                                               match.roll, kLoopYawWeight);
-    }
-    return std::shared_ptr<ceres::CostFunction>(
-        SixDofEdgeError::create(c.relative_t, c.relative_q.normalized()));
-  }
-
-  // ---- validation ---------------------------------------------------------------------
-  /// Empty if the candidate can be scored; else why not. Fills positions.
-  std::string checkCandidate(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
-    if (c.query_index < 0 || c.match_index < 0) return "negative keyframe index";
-    if (c.query_index == c.match_index) return "loop from keyframe " + describeIndex(c.query_index) + " to itself";
-    if (!find(c.query_index, qpos)) return "unknown query keyframe " + describeIndex(c.query_index);
-    if (!find(c.match_index, mpos)) return "unknown match keyframe " + describeIndex(c.match_index);
-    if (c.match_index > c.query_index)
-      return "match keyframe " + describeIndex(c.match_index) + " is newer than query keyframe " +
-             describeIndex(c.query_index);
-    if (!c.relative_t.allFinite() || !std::isfinite(c.relative_yaw))
-      return "relative pose is not finite";
-    if (!unitQuaternion(c.relative_q, cfg.quaternion_tolerance))
-      return "relative rotation is not a unit quaternion";
-    if (c.relative_t.norm() > cfg.max_relative_translation) {
-      std::ostringstream s;
-      s << "relative translation " << c.relative_t.norm() << " m exceeds max_relative_translation "
-        << cfg.max_relative_translation << " m";
-      return s.str();
-    }
-    if (std::abs(compat::wrapAngle(c.relative_yaw)) > cfg.max_relative_yaw) {
-      std::ostringstream s;
-      s << "relative yaw " << c.relative_yaw * 180.0 / M_PI << " deg exceeds max_relative_yaw "
-        << cfg.max_relative_yaw * 180.0 / M_PI << " deg";
-      return s.str();
-    }
-    return std::string();
-  }
-
-  // ---- trial problem ------------------------------------------------------------------
-  void addBlocks(Trial& tr, State& s, bool constant) {
-    if (fourDof()) {
-      tr.problem.AddParameterBlock(&s.yaw, 1);
-      compat::setManifold(tr.problem, &s.yaw, angle_manifold.get());
-    } else {
-      tr.problem.AddParameterBlock(s.q, 4);
-      compat::setManifold(tr.problem, s.q, quaternion_manifold.get());
-    }
-    tr.problem.AddParameterBlock(s.t, 3);
-    if (constant) {
-      tr.problem.SetParameterBlockConstant(fourDof() ? &s.yaw : s.q);
-      tr.problem.SetParameterBlockConstant(s.t);
-    }
-  }
-
-  double* rotBlock(State& s) const { return fourDof() ? &s.yaw : s.q; }
-
-  /// State of position p inside the trial, or a constant block holding x[p] if p is outside.
-  State* stateFor(Trial& tr, size_t p) {
-    if (p >= tr.first && tr.local[p - tr.first] >= 0) return &tr.states[tr.local[p - tr.first]];
-    tr.constants.push_back(x[p]);
-    State* s = &tr.constants.back();
-    addBlocks(tr, *s, true);
-    return s;
-  }
-
-  void addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss) {
-    State* a = stateFor(tr, e.from);
-    State* b = stateFor(tr, e.to);
-    tr.problem.AddResidualBlock(e.cost.get(), loss, rotBlock(*a), a->t, rotBlock(*b), b->t);
-  }
-
-  /// Builds the problem over keyframes [first, newest] whose sequence is in `component`
-  /// (-1: every sequence). from_vio: initial values from the VIO poses (loop_fusion) instead
-  /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
-  void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
-                  ceres::LossFunction* extra_loss) {
-    tr.first = first;
-    tr.local.assign(kfs.size() - first, -1);
-    for (size_t p = first; p < kfs.size(); ++p) {
-      if (component >= 0 && root(kfs[p].sequence) != component) continue;
-      tr.local[p - first] = static_cast<int>(tr.positions.size());
-      tr.positions.push_back(p);
-      tr.states.push_back(from_vio ? stateFromPose(kfs[p].vio) : x[p]);
-    }
-    tr.fixed.resize(tr.positions.size());
-    for (size_t i = 0; i < tr.positions.size(); ++i) {
-      tr.fixed[i] = (i == 0) || kfs[tr.positions[i]].sequence == 0;
-      addBlocks(tr, tr.states[i], tr.fixed[i]);
-    }
-    auto inWindow = [&](size_t p) { return p >= first && tr.local[p - first] >= 0; };
-    auto firstOdom = std::lower_bound(odometry.begin(), odometry.end(), first,
-                                      [](const Edge& e, size_t f) { return e.to < f; });
-    for (auto it = firstOdom; it != odometry.end(); ++it) {
-      if (inWindow(it->from) && inWindow(it->to)) addEdge(tr, *it, nullptr);
-    }
-    for (const Edge& e : loops) {
-      if (inWindow(e.to)) addEdge(tr, e, huber.get());
-    }
-    if (extra) addEdge(tr, *extra, extra_loss);
-  }
-
-  struct SolveOutcome {
-    bool converged = false;
-    bool timed_out = false;
-    bool finite = false;
-    int iterations = 0;
-    double solve_ms = 0;
-    std::string message;
-  };
-
-  SolveOutcome solve(Trial& tr, int max_iterations, double time_budget_ms) {
-    ceres::Solver::Options options;
-    options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-    options.max_num_iterations = std::max(1, max_iterations);
-    if (time_budget_ms > 0) options.max_solver_time_in_seconds = time_budget_ms / 1000.0;
-    options.num_threads = 1;
-    options.function_tolerance = cfg.function_tolerance;
-    options.logging_type = ceres::SILENT;
-    options.minimizer_progress_to_stdout = false;
-    ceres::Solver::Summary summary;
-    const auto t0 = Clock::now();
-    ceres::Solve(options, &tr.problem, &summary);
-    ++solves;
-    SolveOutcome o;
-    o.solve_ms = msSince(t0);
-    // summary.iterations holds iteration 0 (the initial evaluation) too.
-    o.iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
-    o.converged = summary.termination_type == ceres::CONVERGENCE;
-    o.timed_out = summary.termination_type == ceres::NO_CONVERGENCE && time_budget_ms > 0 &&
-                  summary.message.find("time") != std::string::npos;
-    o.message = summary.message;
-    o.finite = true;
-    for (const State& s : tr.states) {
-      if (!std::isfinite(s.t[0]) || !std::isfinite(s.t[1]) || !std::isfinite(s.t[2]) ||
-          !std::isfinite(s.yaw) || !std::isfinite(s.q[0] + s.q[1] + s.q[2] + s.q[3])) {
-        o.finite = false;
-        break;
-      }
-    }
-    return o;
-  }
-
-  /// |t_meas - t_X|: where the candidate puts the query in the match frame vs where X has it.
-  double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
-    const Pose q = poseFromState(x[qpos], kfs[qpos]);
-    const Pose m = poseFromState(x[mpos], kfs[mpos]);
-    return (m.q.conjugate() * (q.t - m.t) - c.relative_t).norm();
-  }
-
-  /// Shortest odometry path [m] from keyframe `from` to `to` through the graph: along a
-  /// sequence by arc length, across accepted loops for free. Dijkstra over the two ends and
-  /// the loop endpoints only (arc-length differences give the chain distances), so the cost
-  /// grows with the number of loops, not of keyframes. Infinite if nothing connects them.
-  double pathLength(size_t from, size_t to) const {
-    std::vector<size_t> nodes = {from, to};
-    for (const Edge& e : loops) {
-      nodes.push_back(e.from);
-      nodes.push_back(e.to);
-    }
-    std::sort(nodes.begin(), nodes.end());
-    nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
-    const size_t n = nodes.size();
-    auto id = [&](size_t p) {
-      return static_cast<int>(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin());
-    };
-    std::vector<std::vector<std::pair<int, double>>> adj(n);
-    for (size_t i = 1; i < n; ++i) {
-      if (kfs[nodes[i - 1]].sequence != kfs[nodes[i]].sequence) continue;
-      const double d = arc[nodes[i]] - arc[nodes[i - 1]];
-      adj[i - 1].emplace_back(static_cast<int>(i), d);
-      adj[i].emplace_back(static_cast<int>(i - 1), d);
-    }
-    for (const Edge& e : loops) {
-      adj[id(e.from)].emplace_back(id(e.to), 0.0);
-      adj[id(e.to)].emplace_back(id(e.from), 0.0);
-    }
-    const int src = id(from), dst = id(to);
-    std::vector<double> dist(n, std::numeric_limits<double>::infinity());
-    using Item = std::pair<double, int>;
-    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
-    dist[src] = 0.0;
-    queue.emplace(0.0, src);
-    while (!queue.empty()) {
-      const Item top = queue.top();
-      queue.pop();
-      if (top.first > dist[top.second]) continue;
-      if (top.second == dst) break;
-      for (const auto& nb : adj[top.second]) {
-        const double d = top.first + nb.second;
-        if (d < dist[nb.first]) {
-          dist[nb.first] = d;
-          queue.emplace(d, nb.first);
-        }
-      }
-    }
-    return dist[dst];
-  }
-
-  size_t windowStart(size_t match_pos) const {
-    const size_t margin = static_cast<size_t>(std::max(0, cfg.window_margin));
-    return match_pos > margin ? match_pos - margin : 0;
-  }
-
-  /// Applies the trial's solution to X and carries the change of the newest window keyframe
-  /// on to keyframes registered after the trial was built.
-  void adoptSolution(const std::vector<size_t>& positions, const std::vector<State>& states) {
-    if (positions.empty()) return;
-    const size_t last = positions.back();
-    const Correction c = correctionBetween(x[last], states.back(), kfs[last]);
-    for (size_t i = 0; i < positions.size(); ++i) x[positions[i]] = states[i];
-    const int comp = root(kfs[last].sequence);
-    for (size_t p = last + 1; p < kfs.size(); ++p) {
-      if (root(kfs[p].sequence) == comp) x[p] = applyCorrection(c, x[p], kfs[p]);
-    }
-  }
-
-  /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
-  void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos) {
-    const Keyframe& old_kf = kfs[mpos];
-    const Keyframe& cur = kfs[qpos];
-    const Eigen::Matrix3d w_R_old = old_kf.vio.q.toRotationMatrix();
-    const Eigen::Vector3d w_P_cur = w_R_old * c.relative_t + old_kf.vio.t;
-    const Eigen::Matrix3d w_R_cur = w_R_old * c.relative_q.normalized().toRotationMatrix();
-    const Eigen::Matrix3d vio_R_cur = cur.vio.q.toRotationMatrix();
-    Correction shift;
-    if (fourDof()) {
-      shift.yaw = compat::wrapAngle(rotationToYawPitchRoll(w_R_cur)[0] - cur.yaw);
-      shift.R = yawPitchRollToRotation(shift.yaw, 0, 0);
-    } else {
-      shift.R = w_R_cur * vio_R_cur.transpose();
-    }
-    // As loop_fusion: shift_t = w_P_cur - w_R_cur * vio_R_cur^T * vio_P_cur.
-    shift.t = w_P_cur - w_R_cur * vio_R_cur.transpose() * cur.vio.t;
-    const int seq = cur.sequence;
-    for (size_t p = 0; p < kfs.size(); ++p) {
-      if (kfs[p].sequence != seq) continue;
-      kfs[p].vio = applyCorrection(shift, kfs[p].vio);
-      const Eigen::Vector3d ypr = rotationToYawPitchRoll(kfs[p].vio.q.toRotationMatrix());
-      kfs[p].yaw = ypr[0];
-      kfs[p].pitch = ypr[1];
-      kfs[p].roll = ypr[2];
-      x[p] = applyCorrection(shift, x[p], kfs[p]);
-    }
-    seq_shift[seq] = shift;
-    seq_anchored[seq] = true;
-  }
-};
-
-// ---------------------------------------------------------------------------------------
-
-Verifier::Verifier(const VerifierConfig& config) : config_(config) {
-  config_error_ = config_.validate();
-  if (!config_error_.empty()) config_ = VerifierConfig();
-  impl_.reset(new Impl(config_));
-}
+Verifier::Verifier(const VerifierConfig& config)
+    : config_error_(config.validate()),
+      config_(config_error_.empty() ? config : VerifierConfig()),
+      graph_(config_) {}
 
 Verifier::~Verifier() = default;
 
 Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                              const Eigen::Quaterniond& q) {
   std::lock_guard<std::mutex> lock(mutex_);
-  Impl& m = *impl_;
-  if (index < 0) return Status::Error("keyframe " + describeIndex(index) + ": negative index");
-  if (sequence < 0) return Status::Error("keyframe " + describeIndex(index) + ": negative sequence");
-  if (!t.allFinite()) return Status::Error("keyframe " + describeIndex(index) + ": position is not finite");
-  if (!std::isfinite(stamp)) return Status::Error("keyframe " + describeIndex(index) + ": stamp is not finite");
-  if (!unitQuaternion(q, config_.quaternion_tolerance))
-    return Status::Error("keyframe " + describeIndex(index) + ": orientation is not a unit quaternion");
-  if (!m.kfs.empty()) {
-    const Impl::Keyframe& last = m.kfs.back();
-    if (index == last.index) return Status::Error("keyframe " + describeIndex(index) + ": duplicate index");
-    if (index < last.index)
-      return Status::Error("keyframe " + describeIndex(index) + ": index older than the newest keyframe " +
-                           describeIndex(last.index));
-    if (sequence < last.sequence)
-      return Status::Error("keyframe " + describeIndex(index) + ": sequence " + std::to_string(sequence) +
-                           " after sequence " + std::to_string(last.sequence));
-    if (sequence == last.sequence && !(stamp > last.stamp)) {
-      std::ostringstream s;
-      s.precision(17);
-      s << "keyframe " << index << ": stamp " << stamp << " not after the previous keyframe's "
-        << last.stamp << " in sequence " << sequence;
-      return Status::Error(s.str());
-    }
-  }
-
-  Impl::Keyframe kf;
-  kf.index = index;
-  kf.stamp = stamp;
-  kf.sequence = sequence;
-  kf.vio = Pose(t, q.normalized());
-  if (config_.anchor_incoming_keyframes) {
-    auto shift = m.seq_shift.find(sequence);
-    if (shift != m.seq_shift.end()) kf.vio = m.applyCorrection(shift->second, kf.vio);
-  }
-  const Eigen::Vector3d ypr = rotationToYawPitchRoll(kf.vio.q.toRotationMatrix());
-  kf.yaw = ypr[0];
-  kf.pitch = ypr[1];
-  kf.roll = ypr[2];
-
-  // X of the new keyframe: its VIO pose carried by the current drift correction of the
-  // previous keyframe of the same sequence (loop_fusion's r_drift / t_drift).
-  State s = m.stateFromPose(kf.vio);
-  const size_t pos = m.kfs.size();
-  if (pos > 0 && m.kfs.back().sequence == sequence) {
-    const Impl::Keyframe& prev = m.kfs.back();
-    const Correction drift = m.correctionBetween(m.stateFromPose(prev.vio), m.x.back(), prev);
-    s = m.applyCorrection(drift, s, kf);
-  }
-  const bool continues = pos > 0 && m.kfs.back().sequence == sequence;
-  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - m.kfs.back().vio.t).norm() : 0.0);
-  m.kfs.push_back(kf);
-  m.x.push_back(s);
-  m.root(sequence);
-  const int n = std::max(0, config_.odometry_neighbours);
-  for (int j = n; j >= 1; --j) {
-    if (pos < static_cast<size_t>(j)) continue;
-    const size_t from = pos - j;
-    if (m.kfs[from].sequence != sequence) continue;
-    Impl::Edge e;
-    e.from = from;
-    e.to = pos;
-    e.cost = m.odometryCost(m.kfs[from], m.kfs[pos]);
-    m.odometry.push_back(std::move(e));
-  }
-  return Status::Ok();
+  return graph_.addKeyframe(index, stamp, sequence, t, q);
 }
 
 Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
-  Impl& m = *impl_;
-  Verdict v;
-  v.query_index = c.query_index;
-  v.match_index = c.match_index;
-  v.threshold = config_.threshold;
-  auto finish = [&](Reason r, bool accepted, std::string detail) {
-    v.reason = r;
-    v.accepted = accepted;
-    v.detail = std::move(detail);
-    v.elapsed_ms = msSince(t0);
-    return v;
+  Verdict measured;  // the numbers gathered on the way to the decision
+  measured.threshold = config_.threshold;
+  auto reject = [&](Reason reason, std::string detail) {
+    return withNumbers(Verdict::Reject(reason, c, std::move(detail)), measured, t0);
   };
 
   size_t qpos = 0, mpos = 0;
-  const std::string bad = m.checkCandidate(c, &qpos, &mpos);
-  if (!bad.empty()) return finish(Reason::kInvalidInput, false, bad);
-  const int qseq = m.kfs[qpos].sequence, mseq = m.kfs[mpos].sequence;
-  if (!m.connected(qseq, mseq)) {
+  const std::string bad = graph_.checkLoop(c, &qpos, &mpos);
+  if (!bad.empty()) return reject(Reason::kInvalidInput, bad);
+  const int qseq = graph_.sequenceAt(qpos), mseq = graph_.sequenceAt(mpos);
+  if (!graph_.connected(qpos, mpos)) {
     std::ostringstream s;
     s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; "
       << (config_.accept_without_prior ? "accepted by policy (accept_without_prior)"
                                        : "rejected by policy (accept_without_prior=false)");
-    return finish(Reason::kNoTrajectoryPrior, config_.accept_without_prior, s.str());
+    if (config_.accept_without_prior)
+      return withNumbers(Verdict::Accept(c, s.str(), Reason::kNoTrajectoryPrior), measured, t0);
+    return reject(Reason::kNoTrajectoryPrior, s.str());
   }
   if (qseq == 0 && mseq == 0)
-    return finish(Reason::kInvalidInput, false,
+    return reject(Reason::kInvalidInput,
                   "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
 
-  v.innovation = m.innovation(c, qpos, mpos);
-  v.path_length = m.pathLength(mpos, qpos);
-  if (config_.threshold_per_metre > 0 && std::isfinite(v.path_length)) {
-    v.threshold += config_.threshold_per_metre * v.path_length;
-    if (config_.max_threshold > 0) v.threshold = std::min(v.threshold, config_.max_threshold);
-  }
-  if (config_.max_innovation > 0 && std::isfinite(v.path_length)) {
-    const double bound = config_.max_innovation + config_.max_innovation_per_metre * v.path_length;
-    if (!(v.innovation <= bound)) {
-      std::ostringstream s;
-      s.precision(3);
-      s << std::fixed << "innovation " << v.innovation << " m > " << bound << " m ("
-        << config_.max_innovation << " m + " << config_.max_innovation_per_metre << " x "
-        << v.path_length << " m of path): more than drift can explain";
-      return finish(Reason::kInnovationAboveBound, false, s.str());
-    }
-  }
+  measured.innovation = graph_.innovation(c, qpos, mpos);
+  measured.path_length = graph_.pathLength(mpos, qpos);
+  measured.threshold = scoreThreshold(config_, measured.path_length);
+  const Check gate = innovationGate(config_, measured.innovation, measured.path_length);
+  if (!gate.passed) return reject(gate.reason, gate.detail);
 
-  Impl::Edge cand;
-  cand.from = mpos;
-  cand.to = qpos;
-  cand.cost = m.loopCost(c, m.kfs[mpos]);
-  Impl::Trial tr;
-  m.buildTrial(tr, m.windowStart(mpos), m.root(qseq), false, &cand,
-               config_.robust_candidate ? m.huber.get() : nullptr);
-  const std::vector<State>& before = m.x;
-  Impl::SolveOutcome o = m.solve(tr, config_.max_iterations, config_.time_budget_ms);
-  v.iterations = o.iterations;
-  v.solve_ms = o.solve_ms;
-  v.converged = o.converged && o.finite;
+  TrialSolution trial = graph_.solveWindow(mpos, qpos, &c, config_.robust_candidate,
+                                           config_.max_iterations, config_.time_budget_ms);
+  const SolveSummary& o = trial.summary;
+  measured.iterations = o.iterations;
+  measured.solve_ms = o.solve_ms;
+  measured.converged = o.converged && o.finite;
+  // Scored: the keyframes that may move (sequence 0 is a fixed prior map).
+  Eigen::Matrix3Xd before, after;
+  measured.window_size = graph_.scoredPositions(trial, &before, &after);
+  if (o.finite) measured.score = deformationScore(before, after, config_.alignment);
 
-  // Score over the keyframes that may move (sequence 0 is a fixed prior map).
-  std::vector<size_t> scored;
-  for (size_t i = 0; i < tr.positions.size(); ++i)
-    if (m.kfs[tr.positions[i]].sequence != 0) scored.push_back(i);
-  v.window_size = static_cast<int>(scored.size());
-  Eigen::Matrix3Xd P(3, scored.size()), Pstar(3, scored.size());
-  for (size_t k = 0; k < scored.size(); ++k) {
-    const size_t i = scored[k];
-    const State& b = before[tr.positions[i]];
-    const State& a = tr.states[i];
-    P.col(k) << b.t[0], b.t[1], b.t[2];
-    Pstar.col(k) << a.t[0], a.t[1], a.t[2];
-  }
-  if (o.finite) {
-    const AlignmentResult al = alignPositions(P, Pstar, config_.alignment == Alignment::kSim3);
-    if (al.ok) v.score = al.rmse;
-  }
-
-  std::ostringstream s;
-  s.precision(3);
-  if (o.timed_out)
-    return finish(Reason::kTimeBudgetExceeded, false,
-                  "trial optimisation ran past time_budget_ms=" + std::to_string(config_.time_budget_ms) +
-                      ": " + o.message);
-  if (!o.converged || !o.finite || !std::isfinite(v.score)) {
-    s << "trial optimisation did not converge after " << o.iterations << " iterations ("
-      << (o.finite ? o.message : "non-finite solution") << ")";
-    return finish(Reason::kNotConverged, false, s.str());
-  }
-  if (v.score > v.threshold) {
-    s << "score " << std::fixed << v.score << " m > threshold " << v.threshold << " m over "
-      << v.window_size << " keyframes";
-    return finish(Reason::kScoreAboveThreshold, false, s.str());
-  }
-  s << "score " << std::fixed << v.score << " m <= threshold " << v.threshold << " m over "
-    << v.window_size << " keyframes";
-  m.pending.valid = true;
-  m.pending.candidate = c;
-  m.pending.revision = m.revision;
-  m.pending.positions = std::move(tr.positions);
-  m.pending.states = std::move(tr.states);
-  return finish(Reason::kAccepted, true, s.str());
+  const Check score = scoreTest(o, measured.score, measured.threshold, measured.window_size,
+                                config_.time_budget_ms);
+  if (!score.passed) return reject(score.reason, score.detail);
+  pending_.valid = true;
+  pending_.candidate = c;
+  pending_.revision = graph_.revision();
+  pending_.solution = std::move(trial);
+  return withNumbers(Verdict::Accept(c, score.detail), measured, t0);
 }
 
-Status Verifier::commit(const LoopCandidate& c, bool update_estimate) {
+Status Verifier::commit(const LoopCandidate& c) {
   std::lock_guard<std::mutex> lock(mutex_);
-  Impl& m = *impl_;
-  size_t qpos = 0, mpos = 0;
-  const std::string bad = m.checkCandidate(c, &qpos, &mpos);
-  if (!bad.empty()) return Status::Error("commit refused: " + bad);
-  for (const Impl::Edge& e : m.loops)
-    if (e.from == mpos && e.to == qpos)
-      return Status::Error("commit refused: loop " + describeIndex(c.query_index) + " -> " +
-                           describeIndex(c.match_index) + " is already in the graph");
-
-  const Impl::Pending& p = m.pending;
-  const bool reuse = p.valid && p.revision == m.revision &&
+  const Pending& p = pending_;
+  const bool reuse = p.valid && p.revision == graph_.revision() &&
                      p.candidate.query_index == c.query_index &&
                      p.candidate.match_index == c.match_index &&
                      p.candidate.relative_t == c.relative_t &&
                      p.candidate.relative_q.coeffs() == c.relative_q.coeffs() &&
                      p.candidate.relative_yaw == c.relative_yaw;
-  const int qseq = m.kfs[qpos].sequence, mseq = m.kfs[mpos].sequence;
-  // loop_fusion: old_kf->sequence != cur_kf->sequence && sequence_loop[cur_kf->sequence] == 0
-  if (qseq != mseq && !m.seq_anchored[qseq]) m.anchorSequence(c, qpos, mpos);
-
-  Impl::Edge e;
-  e.from = mpos;
-  e.to = qpos;
-  e.cost = m.loopCost(c, m.kfs[mpos]);
-  e.loop = c;
-  m.loops.push_back(std::move(e));
-  m.seq_parent[m.root(qseq)] = m.root(mseq);
-  ++m.revision;
-  m.pending.valid = false;
-
-  if (reuse && update_estimate) {
-    m.adoptSolution(p.positions, p.states);
+  const Status added = graph_.addLoop(c);
+  if (!added) return Status::Error("commit refused: " + added.message);
+  pending_.valid = false;
+  if (reuse) {
+    graph_.adopt(p.solution);
     return Status::Ok();
   }
-  if (!update_estimate || (qseq == 0 && mseq == 0)) return Status::Ok();  // (both fixed: nothing moves)
-  Impl::Trial tr;
-  m.buildTrial(tr, m.windowStart(mpos), m.root(qseq), false, nullptr, nullptr);
-  const Impl::SolveOutcome o = m.solve(tr, config_.max_iterations, 0.0);
-  if (!o.finite) {
-    Status s;  // the loop is in the graph (the host uses it); X keeps its old values
-    s.message = "loop committed but the update of the estimate failed (" + o.message + ")";
-    return s;
-  }
-  m.adoptSolution(tr.positions, tr.states);
+  size_t qpos = 0, mpos = 0;
+  graph_.find(c.query_index, &qpos);
+  graph_.find(c.match_index, &mpos);
+  if (graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) return Status::Ok();  // both fixed
+  const TrialSolution s = graph_.solveWindow(mpos, qpos, nullptr, false, config_.max_iterations, 0.0);
+  if (!s.summary.finite)  // the loop is in the graph (the host uses it); X keeps its old values
+    return Status::Warning("loop committed but the update of the estimate failed (" + s.summary.message + ")");
+  graph_.adopt(s);
   return Status::Ok();
 }
 
 size_t Verifier::keyframeCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return impl_->kfs.size();
+  return graph_.keyframeCount();
 }
 
 size_t Verifier::solveCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return impl_->solves;
+  return graph_.solveCount();
 }
 
 size_t Verifier::loopCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return impl_->loops.size();
+  return graph_.loopCount();
 }
 
 bool Verifier::hasKeyframe(int64_t index) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  size_t pos;
-  return impl_->find(index, &pos);
+  return graph_.hasKeyframe(index);
 }
 
 bool Verifier::estimate(int64_t index, Pose* pose) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  size_t pos;
-  if (!impl_->find(index, &pos)) return false;
-  *pose = impl_->poseFromState(impl_->x[pos], impl_->kfs[pos]);
-  return true;
+  return graph_.estimate(index, pose);
 }
 
 std::vector<TrajectoryPoint> Verifier::trajectory() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  const Impl& m = *impl_;
-  std::vector<TrajectoryPoint> out(m.kfs.size());
-  for (size_t p = 0; p < m.kfs.size(); ++p) {
-    out[p].index = m.kfs[p].index;
-    out[p].stamp = m.kfs[p].stamp;
-    out[p].sequence = m.kfs[p].sequence;
-    out[p].vio = m.kfs[p].vio;
-    out[p].estimate = m.poseFromState(m.x[p], m.kfs[p]);
-  }
-  return out;
+  return graph_.trajectory();
 }
 
 BatchSolveResult Verifier::solveLikeLoopFusion(int max_iterations) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  Impl& m = *impl_;
-  BatchSolveResult r;
-  r.poses.resize(m.kfs.size());
-  for (size_t p = 0; p < m.kfs.size(); ++p) r.poses[p] = m.kfs[p].vio;
-  if (m.loops.empty()) {
-    r.ok = true;
-    r.message = "no loops: the VIO trajectory";
-    return r;
-  }
-  size_t first = m.kfs.size();
-  for (const Impl::Edge& e : m.loops) first = std::min(first, e.from);
-  Impl::Trial tr;
-  m.buildTrial(tr, first, -1, true, nullptr, nullptr);
-  const Impl::SolveOutcome o = m.solve(tr, max_iterations, 0.0);
-  r.iterations = o.iterations;
-  r.solve_ms = o.solve_ms;
-  r.free_keyframes = static_cast<int>(tr.positions.size());
-  r.message = o.message;
-  r.ok = o.finite;
-  if (!r.ok) return r;
-  for (size_t i = 0; i < tr.positions.size(); ++i)
-    r.poses[tr.positions[i]] = m.poseFromState(tr.states[i], m.kfs[tr.positions[i]]);
-  return r;
+  return graph_.solveLikeLoopFusion(max_iterations);
 }
 
 }  // namespace core

@@ -1,46 +1,27 @@
 // The ROVER loop verifier: ROS-free, one instance per loop_fusion process.
 //
-// It keeps its own pose graph (keyframe VIO poses, odometry edges to the previous
-// `odometry_neighbours` keyframes of the same sequence, accepted loop edges) and its own
-// current estimate X of every keyframe. For a candidate it solves the graph plus the
-// candidate, warm-started from X, over the window [match - window_margin, newest keyframe]
-// (everything older held fixed, as loop_fusion holds the keyframes before its earliest loop)
-// and scores the deformation: s = RMSE of the positions of X and X* after Umeyama alignment.
-// verify() never changes the graph; commit() adds the loop and keeps the X* of the verify()
-// that accepted it (no second solve).
+// It keeps its own pose graph (core/pose_graph.h: keyframe VIO poses, odometry edges to the
+// previous `odometry_neighbours` keyframes of the same sequence, accepted loop edges) and its
+// own current estimate X of every keyframe. For a candidate it asks the innovation gate, solves
+// the graph plus the candidate, warm-started from X, over the window [match - window_margin,
+// newest keyframe] (everything older held fixed, as loop_fusion holds the keyframes before its
+// earliest loop) and scores the deformation: s = RMSE of the positions of X and X* after
+// Umeyama alignment (the tests themselves: core/decision.h). verify() never changes the graph;
+// commit() adds the loop and keeps the X* of the verify() that accepted it (no second solve).
 //
 // Every public method is safe to call from any thread (one internal mutex), never throws for
 // bad input and never leaves the graph half-changed: bad input comes back as a Status or as a
 // Verdict with reason kInvalidInput.
 #pragma once
 
+#include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/types.h"
 
-#include <memory>
 #include <mutex>
 #include <vector>
 
 namespace rover_loop_fusion {
 namespace core {
-
-/// One keyframe of the verifier's trajectory, as reported by trajectory().
-struct TrajectoryPoint {
-  int64_t index = -1;
-  double stamp = 0.0;
-  int sequence = 0;
-  Pose vio;       ///< as handed to addKeyframe (after any sequence anchoring shift)
-  Pose estimate;  ///< the verifier's current estimate X (VIO + accepted loops)
-};
-
-/// Result of solveLikeLoopFusion(): the trajectory loop_fusion's own optimisation would give.
-struct BatchSolveResult {
-  bool ok = false;
-  std::string message;
-  int iterations = 0;
-  double solve_ms = 0.0;
-  int free_keyframes = 0;
-  std::vector<Pose> poses;  ///< one per keyframe, in trajectory() order
-};
 
 class Verifier {
  public:
@@ -66,10 +47,9 @@ class Verifier {
   /// accepted this very candidate, its X* is kept (no second solve); otherwise (stored loops
   /// of a loaded map, loops accepted without a prior, an override) the graph is solved once.
   /// A first loop between two sequences anchors the query's sequence to the match's frame
-  /// exactly as loop_fusion shifts it (w_r_vio / w_t_vio).
-  /// update_estimate=false only adds the edge (no solve; X unchanged): for replaying a saved
-  /// map or building an accept-all baseline that is solved once at the end.
-  Status commit(const LoopCandidate& candidate, bool update_estimate = true);
+  /// exactly as loop_fusion shifts it (w_r_vio / w_t_vio). (A graph that only collects loops,
+  /// solved once at the end: PoseGraph::addLoop.)
+  Status commit(const LoopCandidate& candidate);
 
   size_t keyframeCount() const;
   size_t loopCount() const;
@@ -88,11 +68,18 @@ class Verifier {
   BatchSolveResult solveLikeLoopFusion(int max_iterations = 5) const;
 
  private:
-  struct Impl;
+  /// The X* of the last verify() that accepted, for commit() to keep.
+  struct Pending {
+    bool valid = false;
+    LoopCandidate candidate;
+    uint64_t revision = 0;  ///< the graph's revision it was solved on
+    TrialSolution solution;
+  };
+  std::string config_error_;  // before config_: the constructor validates first
   VerifierConfig config_;
-  std::string config_error_;
   mutable std::mutex mutex_;
-  std::unique_ptr<Impl> impl_;
+  PoseGraph graph_;
+  Pending pending_;
 };
 
 }  // namespace core

@@ -3,7 +3,7 @@
 // rover_verifier_node load one by type name and drive it with the same calls.
 #pragma once
 
-#include "rover_loop_fusion/core/verifier.h"
+#include "rover_loop_fusion/core/types.h"
 
 #include <ros/node_handle.h>
 

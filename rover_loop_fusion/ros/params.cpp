@@ -1,11 +1,11 @@
 #include "rover_loop_fusion/ros/params.h"
 
+#include "rover_loop_fusion/core/parameters.h"
+
 #include <ros/param.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
 #include <algorithm>
-#include <cmath>
-#include <sstream>
 
 namespace rover_loop_fusion {
 
@@ -50,50 +50,36 @@ void ParamReader::wrongType(const std::string& key, const char* expected) {
 }
 
 const std::vector<std::string>& verifierParameterNames() {
-  static const std::vector<std::string> names = {
-      "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "max_innovation", "max_innovation_per_metre", "accept_without_prior", "max_iterations",
-      "time_budget_ms", "function_tolerance", "odometry_neighbours", "loop_huber",
-      "robust_candidate", "window_margin", "max_relative_translation", "max_relative_yaw_deg",
-      "quaternion_tolerance", "anchor_incoming_keyframes"};
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const core::Parameter& p : core::verifierParameters()) n.push_back(p.name);
+    return n;
+  }();
   return names;
 }
 
 ConfigLoad loadVerifierConfig(const ros::NodeHandle& nh, bool host_uses_imu) {
   ConfigLoad out;
-  core::VerifierConfig& c = out.config;
-  ParamReader r(nh, &out.errors);
-
-  std::string mode = "auto";
-  r.text("mode", &mode);
-  if (mode == "auto") c.mode = host_uses_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
-  else if (!core::parseMode(mode, &c.mode)) r.error("mode", "must be auto, 4dof or 6dof (got '" + mode + "')");
-  std::string alignment = "se3";
-  r.text("alignment", &alignment);
-  if (!core::parseAlignment(alignment, &c.alignment))
-    r.error("alignment", "must be se3 or sim3 (got '" + alignment + "')");
-
-  r.number("threshold", &c.threshold);
-  r.number("threshold_per_metre", &c.threshold_per_metre);
-  r.number("max_threshold", &c.max_threshold);
-  r.number("max_innovation", &c.max_innovation);
-  r.number("max_innovation_per_metre", &c.max_innovation_per_metre);
-  r.boolean("accept_without_prior", &c.accept_without_prior);
-  r.integer("max_iterations", &c.max_iterations);
-  r.number("time_budget_ms", &c.time_budget_ms);
-  r.number("function_tolerance", &c.function_tolerance);
-  r.integer("odometry_neighbours", &c.odometry_neighbours);
-  r.number("loop_huber", &c.loop_huber);
-  r.boolean("robust_candidate", &c.robust_candidate);
-  r.integer("window_margin", &c.window_margin);
-  r.number("max_relative_translation", &c.max_relative_translation);
-  double yaw_deg = c.max_relative_yaw * 180.0 / M_PI;
-  r.number("max_relative_yaw_deg", &yaw_deg);
-  c.max_relative_yaw = yaw_deg * M_PI / 180.0;
-  r.number("quaternion_tolerance", &c.quaternion_tolerance);
-  r.boolean("anchor_incoming_keyframes", &c.anchor_incoming_keyframes);
-
-  const std::string invalid = c.validate();
-  if (!invalid.empty()) out.errors.push_back("in " + nh.getNamespace() + ": " + invalid);
+  // Every key of the parameter table (core/parameters.h): type and range checked by its row.
+  for (const core::Parameter& p : core::verifierParameters()) {
+    XmlRpc::XmlRpcValue v;
+    if (!nh.getParam(p.name, v)) continue;
+    core::ParameterValue value;
+    switch (v.getType()) {
+      case XmlRpc::XmlRpcValue::TypeInt: value = core::ParameterValue::Number(static_cast<int>(v), true); break;
+      case XmlRpc::XmlRpcValue::TypeDouble: value = core::ParameterValue::Number(static_cast<double>(v), false); break;
+      case XmlRpc::XmlRpcValue::TypeBoolean: value = core::ParameterValue::Boolean(static_cast<bool>(v)); break;
+      case XmlRpc::XmlRpcValue::TypeString: value = core::ParameterValue::Text(static_cast<std::string>(v)); break;
+      default: value = core::ParameterValue::Text("<" + v.toXml() + ">"); break;  // a list or a map: wrong type
+    }
+    std::string why;
+    if (!core::assignParameter(p, value, &out.config, &why, host_uses_imu))
+      out.errors.push_back("parameter " + nh.resolveName(p.name) + why.substr(p.name.size()));
+  }
+  // `mode: auto` is the default here (the host decides), not the core's 4dof.
+  if (!nh.hasParam("mode")) out.config.mode = host_uses_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
+  const std::string invalid = out.config.validate();  // the rows' ranges again: a safety net
+  if (!invalid.empty() && out.errors.empty()) out.errors.push_back("in " + nh.getNamespace() + ": " + invalid);
 
   // Unknown keys directly in this namespace are most likely typos.
   std::vector<std::string> all;

@@ -35,13 +35,14 @@ class ParamReader {
   std::vector<std::string>* errors_;
 };
 
-/// Reads every verifier parameter from `nh`'s namespace (see config/rover_indoor.yaml for the
-/// list), falling back to the defaults for absent keys. A key with the wrong type or an
-/// invalid value is an error that names the full parameter. `mode: auto` (the default)
-/// means 4-DoF when the host uses an IMU, 6-DoF otherwise.
+/// Reads every verifier parameter (the table of core/parameters.h; config/rover_indoor.yaml
+/// lists them) from `nh`'s namespace, falling back to the defaults for absent keys. A key with
+/// the wrong type or out of its range is an error that names the full parameter; a key that is
+/// not in the table is a warning (a typo?). `mode: auto` (the default) means 4-DoF when the host
+/// uses an IMU, 6-DoF otherwise.
 ConfigLoad loadVerifierConfig(const ros::NodeHandle& nh, bool host_uses_imu);
 
-/// Names of all verifier parameters (for documentation checks and typo warnings).
+/// Names of all verifier parameters, from the table (for documentation checks and typo warnings).
 const std::vector<std::string>& verifierParameterNames();
 
 }  // namespace rover_loop_fusion

@@ -2,6 +2,7 @@
 //   rover_loop_fusion/TrajectoryPriorVerifier  ROVER: the trajectory-prior test (core::Verifier)
 //   rover_loop_fusion/AcceptAllVerifier        accepts every candidate, as upstream
 //                                              loop_fusion does (the A side of an A/B test)
+#include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/ros/loop_verifier.h"
 #include "rover_loop_fusion/ros/params.h"
 

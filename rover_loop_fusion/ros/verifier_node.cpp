@@ -143,7 +143,7 @@ bool VerifierNode::start(std::string* error) {
   core::VerifierConfig g;  // loop_fusion's graph: its fixed odometry neighbours and Huber loss
   g.mode = p.use_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
   g.anchor_incoming_keyframes = true;
-  graph_.reset(new core::Verifier(g));
+  graph_.reset(new core::PoseGraph(g));
 
   odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
   pose_graph_path_pub_ = pnh_.advertise<nav_msgs::Path>("pose_graph_path", 1, true);
@@ -393,7 +393,7 @@ void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match
   core::Verdict v = verifyAndCommit(*verifier_, verifier_type_, c);
   if (v.accepted) {
     // The core's API reports refusals as a Status; it does not throw.
-    const core::Status g = graph_->commit(c, /*update_estimate=*/false);
+    const core::Status g = graph_->addLoop(c);
     if (g.ok) {
       changed_ = true;
     } else {

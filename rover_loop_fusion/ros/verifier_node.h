@@ -30,7 +30,7 @@
 
 #include "rover_loop_fusion/LoopCandidate.h"
 #include "rover_loop_fusion/Optimize.h"
-#include "rover_loop_fusion/core/verifier.h"
+#include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/ros/verdict_output.h"
 #include "rover_loop_fusion/ros/verifier_loader.h"
 
@@ -126,7 +126,7 @@ class VerifierNode {
   VerifierPtr verifier_;
   /// loop_fusion's pose graph: every keyframe and the loops this node accepted, whatever the
   /// plugin; solved like loop_fusion (solveLikeLoopFusion) for ~pose_graph_path.
-  std::unique_ptr<core::Verifier> graph_;
+  std::unique_ptr<core::PoseGraph> graph_;
   VerdictOutput output_;
   ros::Subscriber keyframe_sub_, candidate_sub_;
   ros::Publisher odometry_path_pub_, pose_graph_path_pub_, estimate_path_pub_;

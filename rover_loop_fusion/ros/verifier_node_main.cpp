@@ -1,4 +1,4 @@
-// rover_verifier_node: see rover_loop_fusion/ros/verifier_node.h and README "Replaying bags".
+// rover_verifier_node: see rover_loop_fusion/ros/verifier_node.h and docs/ros-api.md.
 #include "rover_loop_fusion/ros/verifier_node.h"
 
 #include <ros/ros.h>

@@ -1,7 +1,7 @@
 #include "rover_loop_fusion/sim/scene.h"
 
 #include "rover_loop_fusion/core/alignment.h"
-#include "rover_loop_fusion/core/cost_functions.h"
+#include "rover_loop_fusion/core/geometry.h"
 
 #include <cmath>
 
@@ -27,10 +27,6 @@ Pose compose(const Pose& a, const Pose& b) {
 
 namespace {
 
-Eigen::Quaterniond yawQ(double yaw) {
-  return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
-}
-
 /// Integrates noisy relative motions into VIO poses (4-DoF drift: yaw + translation).
 void integrateVio(std::vector<SimKeyframe>& kfs, double sigma_t, double sigma_yaw, Gaussian& g) {
   for (size_t k = 0; k < kfs.size(); ++k) {
@@ -40,13 +36,9 @@ void integrateVio(std::vector<SimKeyframe>& kfs, double sigma_t, double sigma_ya
     }
     Pose rel = relative(kfs[k - 1].truth, kfs[k].truth);
     rel.t += Eigen::Vector3d(g(sigma_t), g(sigma_t), g(sigma_t));
-    rel.q = (yawQ(g(sigma_yaw)) * rel.q).normalized();
+    rel.q = (core::yawRotation(g(sigma_yaw)) * rel.q).normalized();
     kfs[k].vio = compose(kfs[k - 1].vio, rel);
   }
-}
-
-double yawOf(const Eigen::Quaterniond& q) {
-  return core::rotationToYawPitchRoll(q.toRotationMatrix())[0];
 }
 
 core::LoopCandidate makeCandidate(const SimKeyframe& query, const SimKeyframe& match,
@@ -56,7 +48,7 @@ core::LoopCandidate makeCandidate(const SimKeyframe& query, const SimKeyframe& m
   c.match_index = match.index;
   c.relative_t = rel.t;
   c.relative_q = rel.q;
-  c.relative_yaw = yawOf(rel.q);
+  c.relative_yaw = core::yawOf(rel.q);
   c.inliers = 40;
   return c;
 }
@@ -79,7 +71,7 @@ Scene makeLapsScene(const LapsOptions& o) {
     SimKeyframe kf;
     kf.index = k;
     kf.stamp = 100.0 + 0.5 * k;
-    kf.truth = Pose(Eigen::Vector3d(x, y, o.lap_z_step * k / per_lap), yawQ(yaw));
+    kf.truth = Pose(Eigen::Vector3d(x, y, o.lap_z_step * k / per_lap), core::yawRotation(yaw));
     scene.keyframes.push_back(kf);
   }
   integrateVio(scene.keyframes, o.sigma_t, o.sigma_yaw, g);
@@ -90,14 +82,14 @@ Scene makeLapsScene(const LapsOptions& o) {
   const int w = static_cast<int>(std::ceil((o.false_offset + 1.0) / o.step)) + 2;
   for (int q = o.min_gap; q < n; ++q) {
     const SimKeyframe& kq = scene.keyframes[q];
-    const double yaw_q = yawOf(kq.truth.q);
+    const double yaw_q = core::yawOf(kq.truth.q);
     int best = -1, lookalike = -1;
     double best_d = o.revisit_radius, lookalike_err = 0.75;
     // Only keyframes near the same place on earlier laps can be revisits or look-alikes.
     for (int base = q - per_lap; base + w >= 0; base -= per_lap) {
       for (int m = std::max(0, base - w); m <= base + w && m + o.min_gap <= q; ++m) {
         const double d = (scene.keyframes[m].truth.t - kq.truth.t).norm();
-        if (std::abs(core::wrapAngleDiff(yawOf(scene.keyframes[m].truth.q) - yaw_q)) > 0.5) continue;
+        if (std::abs(core::wrapAngleDiff(core::yawOf(scene.keyframes[m].truth.q) - yaw_q)) > 0.5) continue;
         if (d < best_d) { best = m; best_d = d; }
         if (std::abs(d - o.false_offset) < lookalike_err) { lookalike = m; lookalike_err = std::abs(d - o.false_offset); }
       }
@@ -105,7 +97,7 @@ Scene makeLapsScene(const LapsOptions& o) {
     if (best >= 0 && o.true_every > 0 && ++revisit_count % o.true_every == 0) {
       Pose rel = relative(scene.keyframes[best].truth, kq.truth);
       rel.t += Eigen::Vector3d(g(o.candidate_sigma_t), g(o.candidate_sigma_t), g(o.candidate_sigma_t));
-      rel.q = (yawQ(g(o.candidate_sigma_yaw)) * rel.q).normalized();
+      rel.q = (core::yawRotation(g(o.candidate_sigma_yaw)) * rel.q).normalized();
       SimCandidate sc;
       sc.candidate = makeCandidate(kq, scene.keyframes[best], rel);
       sc.is_true = true;
@@ -116,7 +108,7 @@ Scene makeLapsScene(const LapsOptions& o) {
       const SimKeyframe& km = scene.keyframes[lookalike];
       Pose rel;
       rel.t = Eigen::Vector3d(g(0.3), g(0.3), g(0.05));
-      rel.q = yawQ(core::wrapAngleDiff(yaw_q - yawOf(km.truth.q)) + g(o.candidate_sigma_yaw));
+      rel.q = core::yawRotation(core::wrapAngleDiff(yaw_q - core::yawOf(km.truth.q)) + g(o.candidate_sigma_yaw));
       SimCandidate sc;
       sc.candidate = makeCandidate(kq, km, rel);
       sc.is_true = false;

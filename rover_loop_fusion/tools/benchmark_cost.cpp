@@ -14,7 +14,7 @@
 //
 //   rover_benchmark_cost [--sizes 1000,10000] [--spans 100,1000] [--repeats 20] [--mode 4dof|6dof]
 //                        [--csv FILE]
-#include "rover_loop_fusion/core/cost_functions.h"
+#include "rover_loop_fusion/core/geometry.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -93,7 +93,7 @@ Row run(int n, int span, int repeats, core::Mode mode) {
   const core::Pose rel = sim::relative(m.truth, q.truth);
   c.relative_t = rel.t;
   c.relative_q = rel.q;
-  c.relative_yaw = core::rotationToYawPitchRoll(rel.q.toRotationMatrix())[0];
+  c.relative_yaw = core::yawOf(rel.q);
   (void)last;
 
   Row r{};

@@ -4,6 +4,7 @@
 //
 //   rover_cli_demo [--scene corridor|deck] [--laps N] [--sigma_t M] [--sigma_yaw RAD]
 //                  [--threshold M] [--margin N] [--robust_candidate] [--seed N] [--quiet]
+#include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -73,7 +74,7 @@ int main(int argc, char** argv) {
 
   const sim::Scene s = sim::makeLapsScene(opt);
   core::Verifier verifier(cfg);
-  core::Verifier accept_all(cfg);  // what loop_fusion does without us: every candidate is used
+  core::PoseGraph accept_all(cfg);  // what loop_fusion does without us: every candidate is used
   int tp = 0, fp = 0, tn = 0, fn = 0;
   size_t next = 0;
   std::printf("scene %s: %zu keyframes, %zu candidates (%d laps, sigma_t %.3f m, sigma_yaw %.4f rad)\n",
@@ -83,8 +84,8 @@ int main(int argc, char** argv) {
     std::printf("%6s %6s %5s %7s  %-8s %-22s %8s %5s %7s\n", "query", "match", "label", "dist[m]",
                 "verdict", "reason", "score[m]", "iters", "ms");
   for (const sim::SimKeyframe& kf : s.keyframes) {
-    for (core::Verifier* v : {&verifier, &accept_all}) {
-      const core::Status st = v->addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q);
+    for (const core::Status& st : {verifier.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q),
+                                   accept_all.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q)}) {
       if (!st) {
         std::fprintf(stderr, "addKeyframe failed: %s\n", st.message.c_str());
         return 1;
@@ -94,7 +95,7 @@ int main(int argc, char** argv) {
       const sim::SimCandidate& c = s.candidates[next];
       const core::Verdict vd = verifier.verify(c.candidate);
       if (vd.accepted) verifier.commit(c.candidate);
-      accept_all.commit(c.candidate);
+      accept_all.addLoop(c.candidate);
       if (c.is_true) (vd.accepted ? tp : fn)++;
       else (vd.accepted ? fp : tn)++;
       if (!quiet)

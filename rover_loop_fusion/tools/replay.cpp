@@ -3,12 +3,15 @@
 // keyframe has arrived. Writes the verdict log and the resulting trajectories.
 //
 //   rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]
-//                [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]
-//                [--threshold_per_metre K] [--max_threshold M]
-//                [--max_innovation M] [--max_innovation_per_metre K]  (0: no gate)
-//                [--window_margin N] [--time_budget_ms MS] [--robust_candidate]
-//                [--max_relative_translation M] [--max_relative_yaw_deg D] [--snapshots K]
-//                [--quiet]
+//                [--config FILE] [--<parameter> VALUE ...] [--snapshots K] [--quiet]
+//
+// Verifier parameters: every row of the parameter table (core/parameters.h) is a flag
+// --<name> VALUE (a boolean flag alone means true); --config FILE reads a verifier YAML with
+// the same keys (config/rover_indoor.yaml, rover_outdoor.yaml, rover_paper.yaml). Both apply in
+// command-line order: flags after --config override it. Without either, the defaults of
+// core::VerifierConfig (those of config/rover_indoor.yaml). `mode: auto` is 4dof here
+// (scenarios hold VIO poses). A value of the wrong type or out of range is an error (exit 2).
+// `rover_replay --help` lists every parameter with its unit, range and default.
 //
 // Protocols:
 //   sequential  commit what the verifier accepts (what the product does);
@@ -27,6 +30,8 @@
 //                                   with --snapshots K: the same trajectories as the run had
 //                                   them after k/K of the keyframes, k = 1..K (what the system
 //                                   showed at that time; for the temporal ATE)
+#include "rover_loop_fusion/core/parameters.h"
+#include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/verdict_csv.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scenario_io.h"
@@ -44,15 +49,24 @@ using namespace rover_loop_fusion;
 namespace {
 
 int usage(int code) {
-  std::fprintf(code ? stderr : stdout,
+  std::FILE* out = code ? stderr : stdout;
+  std::fprintf(out,
                "usage: rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]\n"
-               "                    [--mode 4dof|6dof] [--alignment se3|sim3] [--threshold M]\n"
-               "                    [--threshold_per_metre K] [--max_threshold M]\n"
-               "                    [--max_innovation M] [--max_innovation_per_metre K]\n"
-               "                    [--window_margin N] [--time_budget_ms MS] [--robust_candidate]\n"
-               "                    [--max_relative_translation M] [--max_relative_yaw_deg D]\n"
-               "                    [--snapshots K] [--quiet]\n");
+               "                    [--config FILE] [--<parameter> VALUE ...] [--snapshots K] [--quiet]\n"
+               "verifier parameters (applied in order; --config FILE reads a verifier YAML such as\n"
+               "config/rover_indoor.yaml; the defaults are that file's; a boolean flag alone means true):\n");
+  for (const core::Parameter& p : core::verifierParameters())
+    std::fprintf(out, "  --%-26s %-18s default %-7s %s\n", p.name.c_str(), p.range().c_str(),
+                 p.defaultText().c_str(), p.doc.c_str());
   return code;
+}
+
+/// A non-negative integer, the whole text.
+bool count(const std::string& s, int* v) {
+  const core::ParameterValue n = core::ParameterValue::parse(s);
+  if (n.type != core::ParameterValue::Type::kNumber || !n.integral || n.number < 0 || n.number > 1e6) return false;
+  *v = static_cast<int>(n.number);
+  return true;
 }
 
 /// mkdir -p
@@ -81,42 +95,50 @@ int main(int argc, char** argv) {
   core::VerifierConfig cfg;
   bool quiet = false;
   int snapshots = 0;
+  auto fail = [](const std::string& what) {
+    std::fprintf(stderr, "rover_replay: %s (rover_replay --help lists the parameters)\n", what.c_str());
+    return 2;
+  };
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) std::exit(usage(2));
-      return argv[++i];
-    };
-    if (a == "--scenario") scenario_dir = value();
-    else if (a == "--out") out_dir = value();
-    else if (a == "--protocol") protocol = value();
-    else if (a == "--mode") {
-      if (!core::parseMode(value(), &cfg.mode)) return usage(2);
-    } else if (a == "--alignment") {
-      if (!core::parseAlignment(value(), &cfg.alignment)) return usage(2);
-    } else if (a == "--threshold") cfg.threshold = std::atof(value().c_str());
-    else if (a == "--threshold_per_metre") cfg.threshold_per_metre = std::atof(value().c_str());
-    else if (a == "--max_threshold") cfg.max_threshold = std::atof(value().c_str());
-    else if (a == "--max_innovation") cfg.max_innovation = std::atof(value().c_str());
-    else if (a == "--max_innovation_per_metre") cfg.max_innovation_per_metre = std::atof(value().c_str());
-    else if (a == "--window_margin") cfg.window_margin = std::atoi(value().c_str());
-    else if (a == "--time_budget_ms") cfg.time_budget_ms = std::atof(value().c_str());
-    else if (a == "--robust_candidate") cfg.robust_candidate = true;
-    else if (a == "--max_relative_translation") cfg.max_relative_translation = std::atof(value().c_str());
-    else if (a == "--max_relative_yaw_deg") cfg.max_relative_yaw = std::atof(value().c_str()) * M_PI / 180.0;
-    else if (a == "--snapshots") snapshots = std::atoi(value().c_str());
-    else if (a == "--quiet") quiet = true;
-    else if (a == "--help" || a == "-h") return usage(0);
-    else return usage(2);
+    const bool has_value = i + 1 < argc;
+    const core::Parameter* p = a.compare(0, 2, "--") == 0 ? core::findParameter(a.substr(2)) : nullptr;
+    if (p) {
+      std::string text;
+      if (p->type == core::Parameter::Type::kBoolean) {
+        // --flag alone means true; --flag true|false (any other next word is the next flag).
+        const core::ParameterValue next = has_value ? core::ParameterValue::parse(argv[i + 1])
+                                                    : core::ParameterValue();
+        text = next.type == core::ParameterValue::Type::kBoolean ? argv[++i] : "true";
+      } else if (has_value) {
+        text = argv[++i];
+      } else {
+        return fail(a + " needs a value");
+      }
+      std::string why;
+      if (!core::assignParameter(*p, core::ParameterValue::parse(text), &cfg, &why))
+        return fail(a + ": " + why);
+    } else if (a == "--help" || a == "-h") {
+      return usage(0);
+    } else if (!has_value && a != "--quiet") {
+      return fail(a.compare(0, 2, "--") == 0 ? "unknown or incomplete option " + a : "unexpected argument " + a);
+    } else if (a == "--scenario") scenario_dir = argv[++i];
+    else if (a == "--out") out_dir = argv[++i];
+    else if (a == "--protocol") protocol = argv[++i];
+    else if (a == "--config") {
+      std::string error;
+      if (!core::readParameterFile(argv[++i], &cfg, &error)) return fail(error);
+    } else if (a == "--snapshots") {
+      if (!count(argv[++i], &snapshots)) return fail("--snapshots must be a count (got '" + std::string(argv[i]) + "')");
+    } else if (a == "--quiet") quiet = true;
+    else return fail("unknown option " + a);
   }
   if (scenario_dir.empty() || out_dir.empty()) return usage(2);
-  if (protocol != "sequential" && protocol != "oracle" && protocol != "none") return usage(2);
-  if (snapshots < 0) return usage(2);
+  if (protocol != "sequential" && protocol != "oracle" && protocol != "none")
+    return fail("--protocol must be sequential, oracle or none (got '" + protocol + "')");
   const std::string invalid = cfg.validate();
-  if (!invalid.empty()) {
-    std::fprintf(stderr, "rover_replay: invalid parameters: %s\n", invalid.c_str());
-    return 2;
-  }
+  if (!invalid.empty()) return fail("invalid parameters: " + invalid);
+  if (!quiet) std::printf("rover_replay: %s\n", core::describe(cfg).c_str());
   sim::Scenario s;
   std::string error;
   if (!sim::loadScenario(scenario_dir, &s, &error)) {
@@ -137,7 +159,8 @@ int main(int argc, char** argv) {
     by_query.emplace(s.candidates[i].candidate.query_index, i);
   std::map<int64_t, double> stamp_of;
 
-  core::Verifier verifier(cfg), accept_all(cfg);
+  core::Verifier verifier(cfg);
+  core::PoseGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
   int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0;
   size_t verified = 0;
   double verify_ms = 0.0;
@@ -150,7 +173,7 @@ int main(int argc, char** argv) {
     verify_ms += v.elapsed_ms;
     const bool commit = protocol == "sequential" ? v.accepted : protocol == "oracle" ? sc.label == 1 : false;
     if (commit) verifier.commit(c);
-    accept_all.commit(c, false);
+    accept_all.addLoop(c);
     if (sc.label == 1) (v.accepted ? tp : fn)++;
     if (sc.label == 0) (v.accepted ? fp : tn)++;
     const double qs = stamp_of.count(c.query_index) ? stamp_of[c.query_index] : 0.0;

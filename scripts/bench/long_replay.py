@@ -8,7 +8,7 @@ writes results/long_replay/ (summary.txt, rss.csv, verdicts.csv).
                        [--sigma 0.03] [--seed 3] [--optimize-period 0] [--out results/long_replay]
 
 The scene is the corridor loop (120 keyframes a lap, odometry noise --sigma: 0.03 is a good
-VIO, whose first loop is accepted; at 0.05 some seeds lose it, README "Measured limits") driven
+VIO, whose first loop is accepted; at 0.05 some seeds lose it, docs/method.md) driven
 until --keyframes; candidates are
 verified as loop_fusion would produce them (the earliest matching keyframe), so their span
 grows with the run. The bag is played with `rosbag play -r RATE` (keyframes every 0.5 s in

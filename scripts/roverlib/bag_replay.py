@@ -116,7 +116,10 @@ def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, f
     import rospy
     from nav_msgs.msg import Odometry
     from rover_loop_fusion.msg import LoopCandidate
-    messages = rbag.read_bag(bag_path)
+    try:
+        messages = rbag.read_bag(bag_path)
+    except Exception as e:  # rosbag raises its own exceptions, OSError, ValueError, ...
+        raise ReplayError(f"cannot read the bag {bag_path}: {e}") from e
     pubs = {}
     plan = []
     for t, topic, msg in messages:
@@ -135,7 +138,9 @@ def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, f
     deadline = time.monotonic() + connect_timeout
     while not all(p.get_num_connections() >= len(clients) for p in pubs.values()) or \
             not all(c.connected() for c in clients):
-        if time.monotonic() > deadline or rospy.is_shutdown():
+        if rospy.is_shutdown():
+            raise ReplayError("shut down before the verifier nodes subscribed")
+        if time.monotonic() > deadline:
             raise ReplayError("the verifier nodes did not subscribe to " + ", ".join(sorted(pubs)) +
                               f" within {connect_timeout:.0f} s")
         time.sleep(0.05)
@@ -234,18 +239,31 @@ def ate(path, truth):
 
 
 Score = collections.namedtuple("Score", "candidates accepted rejected tp fp tn fn unlabelled precision recall "
-                                        "reasons threshold verifier ate_odometry ate_pose_graph ate_estimate")
+                                        "reasons threshold verifier ate_odometry ate_pose_graph ate_estimate "
+                                        "reason_labels")
+# What decided a verdict, for the summary (the reason strings of LoopVerdict.msg).
+REASON_NOTES = {
+    "accepted": "score <= threshold",
+    "innovation_above_bound": "innovation gate, no solve",
+    "score_above_threshold": "deformation score > threshold",
+    "not_converged": "trial solve did not converge",
+    "time_budget_exceeded": "trial solve out of time",
+    "no_trajectory_prior": "unconnected sequences: policy",
+    "invalid_input": "bad input",
+}
 
 
 def score(client, labels, truth):
     tp = fp = tn = fn = unlabelled = 0
     reasons = collections.Counter()
+    reason_labels = collections.Counter()  # (reason, label 1 / 0 / -1) -> verdicts
     thresholds = set()
     for v in client.verdicts:
         reasons[v.reason] += 1
         if np.isfinite(v.threshold):
             thresholds.add(round(v.threshold, 6))
         label = labels.get(verdict_key(v), -1)
+        reason_labels[(v.reason, label)] += 1
         if label == 1:
             tp += v.accepted
             fn += not v.accepted
@@ -260,7 +278,7 @@ def score(client, labels, truth):
                  tp / (tp + fp) if tp + fp else float("nan"), tp / (tp + fn) if tp + fn else float("nan"),
                  dict(reasons), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
                  ate(r.odometry, truth) if r else float("nan"), ate(r.pose_graph, truth) if r else float("nan"),
-                 ate(r.estimate, truth) if r and r.estimate.poses else float("nan"))
+                 ate(r.estimate, truth) if r and r.estimate.poses else float("nan"), dict(reason_labels))
 
 
 def verdict_line(v, label):
@@ -270,15 +288,36 @@ def verdict_line(v, label):
             f"{v.reason:<22s} score {score_text}  {v.elapsed_ms:6.2f} ms")
 
 
+def _ratio(x):
+    """A precision or recall; '-' for none (no decisions to take it from)."""
+    return f"{x:.3f}" if np.isfinite(x) else "-"
+
+
+def reason_table(s):
+    """Verdicts per reason, one column per label present (true / false / unlabelled)."""
+    columns = [(lab, name) for lab, name in ((1, "true"), (0, "false"), (-1, "unlabelled"))
+               if any(l == lab for _, l in s.reason_labels)]
+    order = list(REASON_NOTES) + sorted({r for r, _ in s.reason_labels} - set(REASON_NOTES))
+    rows = [(f"{r} ({REASON_NOTES[r]})" if r in REASON_NOTES else r,
+             [s.reason_labels.get((r, lab), 0) for lab, _ in columns])
+            for r in order if any(s.reason_labels.get((r, lab), 0) for lab, _ in columns)]
+    width = max([len(name) + 2 for name, _ in rows] + [len("verdicts by reason")])
+    lines = ["  " + "verdicts by reason".ljust(width) + "".join(f"{name:>7s}" for _, name in columns)]
+    lines += ["    " + name.ljust(width - 2) + "".join(f"{n:7d}" for n in counts) for name, counts in rows]
+    return lines
+
+
 def summary_text(verified, accept_all=None):
-    """The demo's summary: the verifying node's verdicts and the ATE of every trajectory."""
+    """The demo's summary: the verifying node's verdicts (per reason and label) and the ATE of
+    every trajectory."""
     s = verified
     thr = ", ".join(f"{t:g}" for t in s.threshold) or "-"
     lines = [
         f"summary: {s.candidates} candidates ({s.tp + s.fn} true, {s.fp + s.tn} false"
         + (f", {s.unlabelled} unlabelled" if s.unlabelled else "") + f"): accepted {s.accepted}, rejected {s.rejected}",
+    ] + reason_table(s) + [
         f"  true positives {s.tp}, false positives {s.fp}, true negatives {s.tn}, false negatives {s.fn}",
-        f"  precision {s.precision:.3f}, recall {s.recall:.3f} (threshold {thr} m)",
+        f"  precision {_ratio(s.precision)}, recall {_ratio(s.recall)} (threshold {thr} m)",
     ]
     if np.isfinite(s.ate_odometry):
         ates = [f"odometry {s.ate_odometry:.3f}"]
@@ -292,7 +331,7 @@ def summary_text(verified, accept_all=None):
         lines.append("  ATE: no ground truth (groundtruth.csv) for these keyframes")
     if accept_all is not None:
         lines.append(f"  accept-all: accepted {accept_all.accepted} of {accept_all.candidates} "
-                     f"(false positives {accept_all.fp}, precision {accept_all.precision:.3f})")
+                     f"(false positives {accept_all.fp}, precision {_ratio(accept_all.precision)})")
     return "\n".join(lines)
 
 

@@ -1,7 +1,7 @@
 // The verifier is called from loop_fusion's keyframe thread while other threads (ROS
 // callbacks, an optimisation thread, tools) read it. Every public method takes the internal
 // mutex; this stress test mixes them from several threads. Under ThreadSanitizer
-// (-DROVER_TSAN=ON, README "Hardening") it shows no data race; in the normal and the ASan
+// (-DROVER_TSAN=ON, docs/testing.md) it shows no data race; in the normal and the ASan
 // builds it checks the results stay consistent.
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"

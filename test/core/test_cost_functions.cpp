@@ -127,3 +127,46 @@ TEST(YawPitchRoll, RoundTrip) {
     EXPECT_TRUE(rotationToYawPitchRoll(R).isApprox(a, 1e-9));
   }
 }
+
+TEST(EdgeInformation, WeightsTheResidualAndItsJacobians) {
+  // The residual handed to Ceres is L r with L^T L = information; unit information is
+  // loop_fusion's weighting and leaves r untouched.
+  Eigen::Matrix4d information = Eigen::Matrix4d::Zero();
+  information.diagonal() << 4.0, 9.0, 1.0, 0.25;
+  information(0, 1) = information(1, 0) = 1.0;
+  Eigen::Matrix4d L;
+  ASSERT_TRUE(sqrtInformation<4>(information, &L));
+  EXPECT_TRUE((L.transpose() * L).isApprox(information, 1e-12));
+  const Eigen::Vector3d t_ij(1.0, -0.5, 0.2);
+  FourDofEdgeCost unit(t_ij, 0.1, 0.05, -0.02, 1.0);
+  FourDofEdgeCost weighted(t_ij, 0.1, 0.05, -0.02, 1.0, &L);
+  const Eigen::Matrix4d I = Eigen::Matrix4d::Identity();
+  FourDofEdgeCost explicit_unit(t_ij, 0.1, 0.05, -0.02, 1.0, &I);
+  double yaw_i = 0.3, yaw_j = 0.5, t_i[3] = {1, 2, 3}, t_j[3] = {2, 1.5, 3.1};
+  std::vector<Eigen::MatrixXd> ju, jw, je;
+  const Eigen::VectorXd ru = residualOf(unit, &yaw_i, t_i, &yaw_j, t_j, &ju);
+  const Eigen::VectorXd rw = residualOf(weighted, &yaw_i, t_i, &yaw_j, t_j, &jw);
+  const Eigen::VectorXd re = residualOf(explicit_unit, &yaw_i, t_i, &yaw_j, t_j, &je);
+  EXPECT_TRUE(rw.isApprox(L * ru, 1e-12));
+  for (int k = 0; k < 4; ++k) EXPECT_TRUE(jw[k].isApprox(L * ju[k], 1e-12)) << "block " << k;
+  EXPECT_EQ(re, ru);
+  for (int k = 0; k < 4; ++k) EXPECT_EQ(je[k], ju[k]);
+
+  Matrix6d info6 = Matrix6d::Identity();
+  info6.diagonal() << 1, 4, 9, 16, 25, 36;
+  Matrix6d L6;
+  ASSERT_TRUE(sqrtInformation<6>(info6, &L6));
+  std::unique_ptr<ceres::CostFunction> six(SixDofEdgeError::create(t_ij, Eigen::Quaterniond::Identity()));
+  std::unique_ptr<ceres::CostFunction> six_w(SixDofEdgeError::create(
+      t_ij, Eigen::Quaterniond::Identity(), kSixDofTranslationSigma, kSixDofRotationSigma, &L6));
+  double q_i[4] = {1, 0, 0, 0}, q_j[4] = {std::cos(0.1), 0, 0, std::sin(0.1)};
+  const Eigen::VectorXd r6 = residualOf(*six, q_i, t_i, q_j, t_j);
+  EXPECT_TRUE(residualOf(*six_w, q_i, t_i, q_j, t_j).isApprox(L6 * r6, 1e-12));
+
+  Eigen::Matrix4d bad = information;
+  bad(3, 3) = -1.0;
+  EXPECT_FALSE(sqrtInformation<4>(bad, &L)) << "not positive definite";
+  bad = information;
+  bad(0, 2) = 5.0;
+  EXPECT_FALSE(sqrtInformation<4>(bad, &L)) << "not symmetric";
+}

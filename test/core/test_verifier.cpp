@@ -1,4 +1,3 @@
-#include "rover_loop_fusion/core/cost_functions.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -95,7 +94,7 @@ TEST(Verifier, FalseFloorLoopInParkingDeckIsRejected) {
   // Parking deck: each lap one floor (3 m) up; the candidate is "the same spot one floor
   // over". Closing it squashes a 3 m climb over one 60 m lap: a ramp that a tilt half
   // absorbs, so the score is about 0.44 m: rejected at the default threshold (0.2 m), but
-  // not at the paper's 0.5 m (measured limit, README).
+  // not at the paper's 0.5 m (measured limit, docs/method.md).
   const sim::Scene s = corridor(7, 3.0);
   const sim::SimCandidate& c = first(s, false);
   core::VerifierConfig score_only;

@@ -4,9 +4,9 @@
 // messages, including the verdicts and markers the adapter publishes. The test checks that
 // every candidate gets exactly one verdict on the topic and that the has_loop decisions
 // match them; built with -DROVER_TSAN=ON and run by hand it is the ThreadSanitizer stress
-// test (README "Hardening").
+// test (docs/testing.md, ThreadSanitizer).
 #include "rover_loop_fusion/LoopVerdict.h"
-#include "rover_loop_fusion/core/verifier.h"
+#include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -58,7 +58,7 @@ TEST(AdapterStress, KeyframeThreadOptimisationThreadAndSpinners) {
 
   // loop_fusion's keyframe list and its mutex (m_keyframelist), shared by the two threads.
   std::mutex keyframelist;
-  core::Verifier graph;  // the optimisation thread's view: keyframes + used loops
+  core::PoseGraph graph;  // the optimisation thread's view: keyframes + used loops
   std::atomic<bool> done(false);
   std::atomic<int> optimisations(0), solves_with_loops(0), mirror_errors(0);
   std::vector<char> has_loop(s.keyframes.size(), 0);
@@ -86,7 +86,7 @@ TEST(AdapterStress, KeyframeThreadOptimisationThreadAndSpinners) {
         const bool use = adapter.verifyLoop(static_cast<int>(c.query_index), static_cast<int>(c.match_index), loopInfo(c));
         has_loop[c.query_index] = use;
         std::lock_guard<std::mutex> lock(keyframelist);
-        if (use && !graph.commit(c, false).ok) ++mirror_errors;
+        if (use && !graph.addLoop(c).ok) ++mirror_errors;
       }
     }
   });

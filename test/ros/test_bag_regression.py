@@ -7,7 +7,7 @@ Required: every false candidate rejected; at least MIN_RECALL of the true ones a
 complete verdict per candidate; the node's verdicts equal rover_replay's on the same scenario
 (the core run without ROS); loop_fusion's optimisation with the verified loops closer to the
 ground truth than the odometry. `rostest rover_loop_fusion bag_regression.test verifier:=accept_all`
-runs the same checks against the accept-all plugin (they fail: README "Tests")."""
+runs the same checks against the accept-all plugin (they fail: docs/testing.md)."""
 import collections
 import csv
 import math
@@ -27,7 +27,7 @@ from roverlib import bag_replay  # noqa: E402
 
 # Measured at the defaults (threshold 0.2 m, innovation gate 0.5 m + 2 %/m): recall 1.0 on
 # data/corridor, data/warehouse and data/euroc_mh05. 0.9 leaves room for a borderline first
-# loop after a long unclosed stretch (README "Measured limits") and still fails a verifier that
+# loop after a long unclosed stretch (docs/method.md) and still fails a verifier that
 # accepts nothing.
 MIN_RECALL = 0.9
 REASONS = {"accepted", "score_above_threshold", "not_converged", "no_trajectory_prior", "invalid_input",

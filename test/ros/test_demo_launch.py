@@ -43,6 +43,14 @@ class DemoLaunch(unittest.TestCase):
         self.assertEqual(params["/rover_demo/baseline"], "/accept_all_verifier")
         self.assertEqual(params["/rover_demo/rate"], 0.0)
 
+    def test_replay_false_leaves_the_replay_to_demo_sh_with_its_parameters(self):
+        params, nodes = load("demo.launch", "replay:=false", "verbose:=false")
+        self.assertEqual(sorted(nodes), ["accept_all_verifier", "rover_verifier"])
+        self.assertEqual(params["/rover_demo/bag"], os.path.join(ROOT, "data", "corridor", "scenario.bag"))
+        self.assertEqual(params["/rover_demo/verifier"], "/rover_verifier")
+        self.assertEqual(params["/rover_demo/baseline"], "/accept_all_verifier")
+        self.assertIs(params["/rover_demo/verbose"], False)
+
     def test_rviz_and_threshold_args(self):
         params, nodes = load("demo.launch", "rviz:=true", "threshold:=0.5")
         rviz = nodes["rover_rviz"]

@@ -1,0 +1,71 @@
+// Angles and yaw-pitch-roll: the one copy, Eigen only (no Ceres), used by the cost functions,
+// the pose graph, the simulator and the tools.
+//
+// Convention: R = Rz(yaw) * Ry(pitch) * Rx(roll), radians (the Z-Y-X convention of
+// loop_fusion's Utility::ypr2R / R2ypr, which work in degrees).
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cmath>
+
+namespace rover_loop_fusion {
+namespace core {
+
+/// An angle wrapped to (-pi, pi], any number of turns.
+inline double wrapAngle(double a) { return std::atan2(std::sin(a), std::cos(a)); }
+
+/// Wraps an angle difference to [-pi, pi] by one turn (the differences here are small).
+/// A template so that Ceres' autodiff (Jet) can use it.
+template <typename T>
+T wrapAngleDiff(const T& a) {
+  if (a > T(M_PI)) return a - T(2.0 * M_PI);
+  if (a < T(-M_PI)) return a + T(2.0 * M_PI);
+  return a;
+}
+
+/// R = Rz(yaw) * Ry(pitch) * Rx(roll), row-major, radians. A template for autodiff.
+template <typename T>
+void yawPitchRollToRotation(const T& yaw, const T& pitch, const T& roll, T R[9]) {
+  using std::cos;
+  using std::sin;
+  const T cy = cos(yaw), sy = sin(yaw), cp = cos(pitch), sp = sin(pitch), cr = cos(roll),
+          sr = sin(roll);
+  R[0] = cy * cp;
+  R[1] = -sy * cr + cy * sp * sr;
+  R[2] = sy * sr + cy * sp * cr;
+  R[3] = sy * cp;
+  R[4] = cy * cr + sy * sp * sr;
+  R[5] = -cy * sr + sy * sp * cr;
+  R[6] = -sp;
+  R[7] = cp * sr;
+  R[8] = cp * cr;
+}
+
+inline Eigen::Matrix3d yawPitchRollToRotation(double yaw, double pitch, double roll) {
+  double R[9];
+  yawPitchRollToRotation(yaw, pitch, roll, R);
+  Eigen::Matrix3d M;
+  M << R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8];
+  return M;
+}
+
+/// Yaw, pitch, roll (radians, Z-Y-X) of a rotation matrix.
+inline Eigen::Vector3d rotationToYawPitchRoll(const Eigen::Matrix3d& R) {
+  const double yaw = std::atan2(R(1, 0), R(0, 0));
+  const double pitch = std::atan2(-R(2, 0), std::hypot(R(0, 0), R(1, 0)));
+  const double roll = std::atan2(R(2, 1), R(2, 2));
+  return Eigen::Vector3d(yaw, pitch, roll);
+}
+
+/// Yaw (radians, Z-Y-X) of a rotation.
+inline double yawOf(const Eigen::Quaterniond& q) { return rotationToYawPitchRoll(q.toRotationMatrix())[0]; }
+
+/// A rotation about the z axis.
+inline Eigen::Quaterniond yawRotation(double yaw) {
+  return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion

@@ -1,0 +1,676 @@
+#include "rover_loop_fusion/core/pose_graph.h"
+
+#include "rover_loop_fusion/core/ceres_compat.h"
+#include "rover_loop_fusion/core/cost_functions.h"
+#include "rover_loop_fusion/core/geometry.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <map>
+#include <queue>
+#include <sstream>
+
+namespace rover_loop_fusion {
+namespace core {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+bool unitQuaternion(const Eigen::Quaterniond& q, double tol) {
+  return q.coeffs().allFinite() && std::abs(q.norm() - 1.0) <= tol;
+}
+
+std::string describeIndex(int64_t i) { return std::to_string(static_cast<long long>(i)); }
+
+/// A rigid correction: 4-DoF keeps it to yaw + translation.
+struct Correction {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double yaw = 0;
+};
+
+}  // namespace
+
+struct PoseGraph::Impl {
+  struct Keyframe {
+    int64_t index;
+    double stamp;
+    int sequence;
+    Pose vio;
+    double yaw, pitch, roll;  // of vio, radians
+  };
+  /// A relative-pose measurement between two keyframes. `information` weights its residual
+  /// (core/cost_functions.h; 4-DoF: the top-left 4 x 4 block, residual order x, y, z, yaw;
+  /// 6-DoF: all of it); null is unit information, loop_fusion's weighting (today every edge's:
+  /// a drift model fills it in).
+  struct Edge {
+    size_t from, to;  // positions; from is the older keyframe
+    std::shared_ptr<const Matrix6d> information;
+    std::shared_ptr<ceres::CostFunction> cost;
+    LoopCandidate loop;  // loops only
+  };
+  /// A trial problem over the window [first, newest] of one component.
+  struct Trial {
+    explicit Trial() : problem(compat::problemOptionsNotOwning()) {}
+    ceres::Problem problem;
+    size_t first = 0;
+    std::vector<size_t> positions;   // window keyframes, increasing
+    std::vector<int> local;          // position - first -> index into positions, or -1
+    std::vector<KeyframeState> states;  // same order as positions
+    std::deque<KeyframeState> constants;  // loop endpoints outside the window (stable addresses)
+  };
+
+  const VerifierConfig& cfg;
+  std::vector<Keyframe> kfs;
+  std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's sequence
+  std::vector<KeyframeState> x;
+  std::vector<Edge> odometry;  // appended in increasing `to`
+  std::vector<Edge> loops;
+  std::map<int, int> seq_parent;     // union-find over sequence ids
+  std::map<int, bool> seq_anchored;  // loop_fusion's sequence_loop
+  std::map<int, Correction> seq_shift;  // applied to incoming poses if anchor_incoming_keyframes
+  std::unique_ptr<ceres::LossFunction> huber;
+  std::unique_ptr<compat::ParameterManifold> angle_manifold;
+  std::unique_ptr<compat::ParameterManifold> quaternion_manifold;
+  uint64_t revision = 0;
+  size_t solves = 0;
+
+  explicit Impl(const VerifierConfig& c)
+      : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
+        angle_manifold(new compat::AngleManifold()),
+        quaternion_manifold(compat::newQuaternionManifold()) {}
+
+  bool fourDof() const { return cfg.mode == Mode::kFourDof; }
+
+  // ---- lookup -------------------------------------------------------------------------
+  bool find(int64_t index, size_t* pos) const;
+  int root(int seq);
+
+  // ---- poses and states ---------------------------------------------------------------
+  KeyframeState stateFromPose(const Pose& p) const;
+  Pose poseFromState(const KeyframeState& s, const Keyframe& kf) const;
+  Eigen::Matrix3d rotationOf(const KeyframeState& s, const Keyframe& kf) const;
+  /// The correction that maps `before` onto `after` (4-DoF: yaw + translation only, like
+  /// loop_fusion's r_drift / t_drift).
+  Correction correctionBetween(const KeyframeState& before, const KeyframeState& after,
+                               const Keyframe& kf) const;
+  KeyframeState applyCorrection(const Correction& c, const KeyframeState& s, const Keyframe& kf) const;
+  Pose applyCorrection(const Correction& c, const Pose& p) const;
+  void setYawPitchRoll(Keyframe& kf) const;
+
+  // ---- edges --------------------------------------------------------------------------
+  /// The Ceres cost of an edge with the given measurement, weighted by its information.
+  std::shared_ptr<ceres::CostFunction> edgeCost(const Eigen::Vector3d& t_ij, double yaw_ij,
+                                                const Eigen::Quaterniond& q_ij, const Keyframe& from,
+                                                double yaw_weight, const Matrix6d* information) const;
+  void setOdometryCost(Edge& e) const;
+  void setLoopCost(Edge& e) const;
+
+  // ---- validation ---------------------------------------------------------------------
+  std::string checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const;
+
+  // ---- trial problem ------------------------------------------------------------------
+  void addBlocks(Trial& tr, KeyframeState& s, bool constant);
+  double* rotBlock(KeyframeState& s) const { return fourDof() ? &s.yaw : s.q; }
+  /// State of position p inside the trial, or a constant block holding x[p] if p is outside.
+  KeyframeState* stateFor(Trial& tr, size_t p);
+  void addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss);
+  /// Builds the problem over keyframes [first, newest] whose sequence is in `component`
+  /// (-1: every sequence). from_vio: initial values from the VIO poses (loop_fusion) instead
+  /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
+  void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
+                  ceres::LossFunction* extra_loss);
+  SolveSummary solve(Trial& tr, int max_iterations, double time_budget_ms);
+  double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
+  /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
+  /// chain distances), so the cost grows with the number of loops, not of keyframes.
+  double pathLength(size_t from, size_t to) const;
+  size_t windowStart(size_t match_pos) const;
+  void adopt(const std::vector<size_t>& positions, const std::vector<KeyframeState>& states);
+  /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
+  void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos);
+};
+
+bool PoseGraph::Impl::find(int64_t index, size_t* pos) const {
+  auto it = std::lower_bound(kfs.begin(), kfs.end(), index,
+                             [](const Keyframe& k, int64_t i) { return k.index < i; });
+  if (it == kfs.end() || it->index != index) return false;
+  *pos = static_cast<size_t>(it - kfs.begin());
+  return true;
+}
+
+int PoseGraph::Impl::root(int seq) {
+  auto it = seq_parent.find(seq);
+  if (it == seq_parent.end()) {
+    seq_parent[seq] = seq;
+    return seq;
+  }
+  if (it->second == seq) return seq;
+  const int r = root(it->second);
+  seq_parent[seq] = r;
+  return r;
+}
+
+KeyframeState PoseGraph::Impl::stateFromPose(const Pose& p) const {
+  KeyframeState s;
+  for (int k = 0; k < 3; ++k) s.t[k] = p.t[k];
+  s.yaw = rotationToYawPitchRoll(p.q.toRotationMatrix())[0];
+  const Eigen::Quaterniond q = p.q.normalized();
+  s.q[0] = q.w();
+  s.q[1] = q.x();
+  s.q[2] = q.y();
+  s.q[3] = q.z();
+  return s;
+}
+
+Pose PoseGraph::Impl::poseFromState(const KeyframeState& s, const Keyframe& kf) const {
+  Pose p;
+  p.t = Eigen::Vector3d(s.t[0], s.t[1], s.t[2]);
+  if (fourDof()) {
+    p.q = Eigen::Quaterniond(yawPitchRollToRotation(s.yaw, kf.pitch, kf.roll));
+  } else {
+    p.q = Eigen::Quaterniond(s.q[0], s.q[1], s.q[2], s.q[3]).normalized();
+  }
+  return p;
+}
+
+Eigen::Matrix3d PoseGraph::Impl::rotationOf(const KeyframeState& s, const Keyframe& kf) const {
+  return poseFromState(s, kf).q.toRotationMatrix();
+}
+
+Correction PoseGraph::Impl::correctionBetween(const KeyframeState& before, const KeyframeState& after,
+                                              const Keyframe& kf) const {
+  Correction c;
+  if (fourDof()) {
+    c.yaw = wrapAngle(after.yaw - before.yaw);
+    c.R = yawPitchRollToRotation(c.yaw, 0, 0);
+  } else {
+    c.R = rotationOf(after, kf) * rotationOf(before, kf).transpose();
+  }
+  const Eigen::Vector3d tb(before.t[0], before.t[1], before.t[2]);
+  const Eigen::Vector3d ta(after.t[0], after.t[1], after.t[2]);
+  c.t = ta - c.R * tb;
+  return c;
+}
+
+KeyframeState PoseGraph::Impl::applyCorrection(const Correction& c, const KeyframeState& s,
+                                               const Keyframe& kf) const {
+  KeyframeState o = s;
+  const Eigen::Vector3d t = c.R * Eigen::Vector3d(s.t[0], s.t[1], s.t[2]) + c.t;
+  for (int k = 0; k < 3; ++k) o.t[k] = t[k];
+  if (fourDof()) {
+    o.yaw = wrapAngle(s.yaw + c.yaw);
+  } else {
+    const Eigen::Quaterniond q(c.R * rotationOf(s, kf));
+    o.q[0] = q.w();
+    o.q[1] = q.x();
+    o.q[2] = q.y();
+    o.q[3] = q.z();
+  }
+  return o;
+}
+
+Pose PoseGraph::Impl::applyCorrection(const Correction& c, const Pose& p) const {
+  return Pose(c.R * p.t + c.t, Eigen::Quaterniond(c.R * p.q.toRotationMatrix()));
+}
+
+void PoseGraph::Impl::setYawPitchRoll(Keyframe& kf) const {
+  const Eigen::Vector3d ypr = rotationToYawPitchRoll(kf.vio.q.toRotationMatrix());
+  kf.yaw = ypr[0];
+  kf.pitch = ypr[1];
+  kf.roll = ypr[2];
+}
+
+std::shared_ptr<ceres::CostFunction> PoseGraph::Impl::edgeCost(const Eigen::Vector3d& t_ij,
+                                                               double yaw_ij,
+                                                               const Eigen::Quaterniond& q_ij, const Keyframe& from,
+                                                               double yaw_weight, const Matrix6d* information) const {
+  if (fourDof()) {
+    Eigen::Matrix4d L = Eigen::Matrix4d::Identity();
+    if (information) sqrtInformation<4>(information->topLeftCorner<4, 4>(), &L);
+    return std::make_shared<FourDofEdgeCost>(t_ij, yaw_ij, from.pitch, from.roll, yaw_weight, &L);
+  }
+  Matrix6d L = Matrix6d::Identity();
+  if (information) sqrtInformation<6>(*information, &L);
+  return std::shared_ptr<ceres::CostFunction>(
+      SixDofEdgeError::create(t_ij, q_ij, kSixDofTranslationSigma, kSixDofRotationSigma, &L));
+}
+
+void PoseGraph::Impl::setOdometryCost(Edge& e) const {
+  const Keyframe& a = kfs[e.from];
+  const Keyframe& b = kfs[e.to];
+  const Eigen::Vector3d t_ab = a.vio.q.conjugate() * (b.vio.t - a.vio.t);
+  e.cost = edgeCost(t_ab, wrapAngle(b.yaw - a.yaw), a.vio.q.conjugate() * b.vio.q, a, 1.0,
+                    e.information.get());
+}
+
+void PoseGraph::Impl::setLoopCost(Edge& e) const {
+  const LoopCandidate& c = e.loop;
+  e.cost = edgeCost(c.relative_t, c.relative_yaw, c.relative_q.normalized(), kfs[e.from], kLoopYawWeight,
+                    e.information.get());
+}
+
+std::string PoseGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
+  if (c.query_index < 0 || c.match_index < 0) return "negative keyframe index";
+  if (c.query_index == c.match_index) return "loop from keyframe " + describeIndex(c.query_index) + " to itself";
+  if (!find(c.query_index, qpos)) return "unknown query keyframe " + describeIndex(c.query_index);
+  if (!find(c.match_index, mpos)) return "unknown match keyframe " + describeIndex(c.match_index);
+  if (c.match_index > c.query_index)
+    return "match keyframe " + describeIndex(c.match_index) + " is newer than query keyframe " +
+           describeIndex(c.query_index);
+  if (!c.relative_t.allFinite() || !std::isfinite(c.relative_yaw))
+    return "relative pose is not finite";
+  if (!unitQuaternion(c.relative_q, cfg.quaternion_tolerance))
+    return "relative rotation is not a unit quaternion";
+  if (c.relative_t.norm() > cfg.max_relative_translation) {
+    std::ostringstream s;
+    s << "relative translation " << c.relative_t.norm() << " m exceeds max_relative_translation "
+      << cfg.max_relative_translation << " m";
+    return s.str();
+  }
+  if (std::abs(wrapAngle(c.relative_yaw)) > cfg.max_relative_yaw) {
+    std::ostringstream s;
+    s << "relative yaw " << c.relative_yaw * 180.0 / M_PI << " deg exceeds max_relative_yaw "
+      << cfg.max_relative_yaw * 180.0 / M_PI << " deg";
+    return s.str();
+  }
+  return std::string();
+}
+
+void PoseGraph::Impl::addBlocks(Trial& tr, KeyframeState& s, bool constant) {
+  if (fourDof()) {
+    tr.problem.AddParameterBlock(&s.yaw, 1);
+    compat::setManifold(tr.problem, &s.yaw, angle_manifold.get());
+  } else {
+    tr.problem.AddParameterBlock(s.q, 4);
+    compat::setManifold(tr.problem, s.q, quaternion_manifold.get());
+  }
+  tr.problem.AddParameterBlock(s.t, 3);
+  if (constant) {
+    tr.problem.SetParameterBlockConstant(fourDof() ? &s.yaw : s.q);
+    tr.problem.SetParameterBlockConstant(s.t);
+  }
+}
+
+KeyframeState* PoseGraph::Impl::stateFor(Trial& tr, size_t p) {
+  if (p >= tr.first && tr.local[p - tr.first] >= 0) return &tr.states[tr.local[p - tr.first]];
+  tr.constants.push_back(x[p]);
+  KeyframeState* s = &tr.constants.back();
+  addBlocks(tr, *s, true);
+  return s;
+}
+
+void PoseGraph::Impl::addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss) {
+  KeyframeState* a = stateFor(tr, e.from);
+  KeyframeState* b = stateFor(tr, e.to);
+  tr.problem.AddResidualBlock(e.cost.get(), loss, rotBlock(*a), a->t, rotBlock(*b), b->t);
+}
+
+void PoseGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
+                                 ceres::LossFunction* extra_loss) {
+  tr.first = first;
+  tr.local.assign(kfs.size() - first, -1);
+  for (size_t p = first; p < kfs.size(); ++p) {
+    if (component >= 0 && root(kfs[p].sequence) != component) continue;
+    tr.local[p - first] = static_cast<int>(tr.positions.size());
+    tr.positions.push_back(p);
+    tr.states.push_back(from_vio ? stateFromPose(kfs[p].vio) : x[p]);
+  }
+  for (size_t i = 0; i < tr.positions.size(); ++i)
+    addBlocks(tr, tr.states[i], i == 0 || kfs[tr.positions[i]].sequence == 0);
+  auto inWindow = [&](size_t p) { return p >= first && tr.local[p - first] >= 0; };
+  auto firstOdom = std::lower_bound(odometry.begin(), odometry.end(), first,
+                                    [](const Edge& e, size_t f) { return e.to < f; });
+  for (auto it = firstOdom; it != odometry.end(); ++it) {
+    if (inWindow(it->from) && inWindow(it->to)) addEdge(tr, *it, nullptr);
+  }
+  for (const Edge& e : loops) {
+    if (inWindow(e.to)) addEdge(tr, e, huber.get());
+  }
+  if (extra) addEdge(tr, *extra, extra_loss);
+}
+
+SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms) {
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = std::max(1, max_iterations);
+  if (time_budget_ms > 0) options.max_solver_time_in_seconds = time_budget_ms / 1000.0;
+  options.num_threads = 1;
+  options.function_tolerance = cfg.function_tolerance;
+  options.logging_type = ceres::SILENT;
+  options.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary summary;
+  const auto t0 = Clock::now();
+  ceres::Solve(options, &tr.problem, &summary);
+  ++solves;
+  SolveSummary o;
+  o.solve_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  // summary.iterations holds iteration 0 (the initial evaluation) too.
+  o.iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+  o.converged = summary.termination_type == ceres::CONVERGENCE;
+  o.timed_out = summary.termination_type == ceres::NO_CONVERGENCE && time_budget_ms > 0 &&
+                summary.message.find("time") != std::string::npos;
+  o.message = summary.message;
+  o.finite = true;
+  for (const KeyframeState& s : tr.states) {
+    if (!std::isfinite(s.t[0]) || !std::isfinite(s.t[1]) || !std::isfinite(s.t[2]) ||
+        !std::isfinite(s.yaw) || !std::isfinite(s.q[0] + s.q[1] + s.q[2] + s.q[3])) {
+      o.finite = false;
+      break;
+    }
+  }
+  return o;
+}
+
+double PoseGraph::Impl::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+  const Pose q = poseFromState(x[qpos], kfs[qpos]);
+  const Pose m = poseFromState(x[mpos], kfs[mpos]);
+  return (m.q.conjugate() * (q.t - m.t) - c.relative_t).norm();
+}
+
+double PoseGraph::Impl::pathLength(size_t from, size_t to) const {
+  std::vector<size_t> nodes = {from, to};
+  for (const Edge& e : loops) {
+    nodes.push_back(e.from);
+    nodes.push_back(e.to);
+  }
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  const size_t n = nodes.size();
+  auto id = [&](size_t p) {
+    return static_cast<int>(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin());
+  };
+  std::vector<std::vector<std::pair<int, double>>> adj(n);
+  for (size_t i = 1; i < n; ++i) {
+    if (kfs[nodes[i - 1]].sequence != kfs[nodes[i]].sequence) continue;
+    const double d = arc[nodes[i]] - arc[nodes[i - 1]];
+    adj[i - 1].emplace_back(static_cast<int>(i), d);
+    adj[i].emplace_back(static_cast<int>(i - 1), d);
+  }
+  for (const Edge& e : loops) {
+    adj[id(e.from)].emplace_back(id(e.to), 0.0);
+    adj[id(e.to)].emplace_back(id(e.from), 0.0);
+  }
+  const int src = id(from), dst = id(to);
+  std::vector<double> dist(n, std::numeric_limits<double>::infinity());
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+  dist[src] = 0.0;
+  queue.emplace(0.0, src);
+  while (!queue.empty()) {
+    const Item top = queue.top();
+    queue.pop();
+    if (top.first > dist[top.second]) continue;
+    if (top.second == dst) break;
+    for (const auto& nb : adj[top.second]) {
+      const double d = top.first + nb.second;
+      if (d < dist[nb.first]) {
+        dist[nb.first] = d;
+        queue.emplace(d, nb.first);
+      }
+    }
+  }
+  return dist[dst];
+}
+
+size_t PoseGraph::Impl::windowStart(size_t match_pos) const {
+  const size_t margin = static_cast<size_t>(std::max(0, cfg.window_margin));
+  return match_pos > margin ? match_pos - margin : 0;
+}
+
+void PoseGraph::Impl::adopt(const std::vector<size_t>& positions,
+                            const std::vector<KeyframeState>& states) {
+  if (positions.empty()) return;
+  const size_t last = positions.back();
+  const Correction c = correctionBetween(x[last], states.back(), kfs[last]);
+  for (size_t i = 0; i < positions.size(); ++i) x[positions[i]] = states[i];
+  const int comp = root(kfs[last].sequence);
+  for (size_t p = last + 1; p < kfs.size(); ++p) {
+    if (root(kfs[p].sequence) == comp) x[p] = applyCorrection(c, x[p], kfs[p]);
+  }
+}
+
+void PoseGraph::Impl::anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos) {
+  const Keyframe& old_kf = kfs[mpos];
+  const Keyframe& cur = kfs[qpos];
+  const Eigen::Matrix3d w_R_old = old_kf.vio.q.toRotationMatrix();
+  const Eigen::Vector3d w_P_cur = w_R_old * c.relative_t + old_kf.vio.t;
+  const Eigen::Matrix3d w_R_cur = w_R_old * c.relative_q.normalized().toRotationMatrix();
+  const Eigen::Matrix3d vio_R_cur = cur.vio.q.toRotationMatrix();
+  Correction shift;
+  if (fourDof()) {
+    shift.yaw = wrapAngle(rotationToYawPitchRoll(w_R_cur)[0] - cur.yaw);
+    shift.R = yawPitchRollToRotation(shift.yaw, 0, 0);
+  } else {
+    shift.R = w_R_cur * vio_R_cur.transpose();
+  }
+  // As loop_fusion: shift_t = w_P_cur - w_R_cur * vio_R_cur^T * vio_P_cur.
+  shift.t = w_P_cur - w_R_cur * vio_R_cur.transpose() * cur.vio.t;
+  const int seq = cur.sequence;
+  for (size_t p = 0; p < kfs.size(); ++p) {
+    if (kfs[p].sequence != seq) continue;
+    kfs[p].vio = applyCorrection(shift, kfs[p].vio);
+    setYawPitchRoll(kfs[p]);
+    x[p] = applyCorrection(shift, x[p], kfs[p]);
+  }
+  seq_shift[seq] = shift;
+  seq_anchored[seq] = true;
+}
+
+// ---------------------------------------------------------------------------------------
+
+PoseGraph::PoseGraph(const VerifierConfig& config) : config_(config), impl_(new Impl(config_)) {}
+
+PoseGraph::~PoseGraph() = default;
+
+Status PoseGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
+                              const Eigen::Quaterniond& q) {
+  Impl& m = *impl_;
+  if (index < 0) return Status::Error("keyframe " + describeIndex(index) + ": negative index");
+  if (sequence < 0) return Status::Error("keyframe " + describeIndex(index) + ": negative sequence");
+  if (!t.allFinite()) return Status::Error("keyframe " + describeIndex(index) + ": position is not finite");
+  if (!std::isfinite(stamp)) return Status::Error("keyframe " + describeIndex(index) + ": stamp is not finite");
+  if (!unitQuaternion(q, config_.quaternion_tolerance))
+    return Status::Error("keyframe " + describeIndex(index) + ": orientation is not a unit quaternion");
+  if (!m.kfs.empty()) {
+    const Impl::Keyframe& last = m.kfs.back();
+    if (index == last.index) return Status::Error("keyframe " + describeIndex(index) + ": duplicate index");
+    if (index < last.index)
+      return Status::Error("keyframe " + describeIndex(index) + ": index older than the newest keyframe " +
+                           describeIndex(last.index));
+    if (sequence < last.sequence)
+      return Status::Error("keyframe " + describeIndex(index) + ": sequence " + std::to_string(sequence) +
+                           " after sequence " + std::to_string(last.sequence));
+    if (sequence == last.sequence && !(stamp > last.stamp)) {
+      std::ostringstream s;
+      s.precision(17);
+      s << "keyframe " << index << ": stamp " << stamp << " not after the previous keyframe's "
+        << last.stamp << " in sequence " << sequence;
+      return Status::Error(s.str());
+    }
+  }
+
+  Impl::Keyframe kf;
+  kf.index = index;
+  kf.stamp = stamp;
+  kf.sequence = sequence;
+  kf.vio = Pose(t, q.normalized());
+  if (config_.anchor_incoming_keyframes) {
+    auto shift = m.seq_shift.find(sequence);
+    if (shift != m.seq_shift.end()) kf.vio = m.applyCorrection(shift->second, kf.vio);
+  }
+  m.setYawPitchRoll(kf);
+
+  // X of the new keyframe: its VIO pose carried by the current drift correction of the
+  // previous keyframe of the same sequence (loop_fusion's r_drift / t_drift).
+  KeyframeState s = m.stateFromPose(kf.vio);
+  const size_t pos = m.kfs.size();
+  const bool continues = pos > 0 && m.kfs.back().sequence == sequence;
+  if (continues) {
+    const Impl::Keyframe& prev = m.kfs.back();
+    const Correction drift = m.correctionBetween(m.stateFromPose(prev.vio), m.x.back(), prev);
+    s = m.applyCorrection(drift, s, kf);
+  }
+  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - m.kfs.back().vio.t).norm() : 0.0);
+  m.kfs.push_back(kf);
+  m.x.push_back(s);
+  m.root(sequence);
+  const int n = std::max(0, config_.odometry_neighbours);
+  for (int j = n; j >= 1; --j) {
+    if (pos < static_cast<size_t>(j)) continue;
+    const size_t from = pos - j;
+    if (m.kfs[from].sequence != sequence) continue;
+    Impl::Edge e;
+    e.from = from;
+    e.to = pos;
+    m.setOdometryCost(e);
+    m.odometry.push_back(std::move(e));
+  }
+  return Status::Ok();
+}
+
+size_t PoseGraph::keyframeCount() const { return impl_->kfs.size(); }
+
+bool PoseGraph::hasKeyframe(int64_t index) const {
+  size_t pos;
+  return impl_->find(index, &pos);
+}
+
+bool PoseGraph::find(int64_t index, size_t* position) const { return impl_->find(index, position); }
+
+int PoseGraph::sequenceAt(size_t position) const { return impl_->kfs[position].sequence; }
+
+std::string PoseGraph::checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
+  return impl_->checkLoop(c, qpos, mpos);
+}
+
+Status PoseGraph::addLoop(const LoopCandidate& c) {
+  Impl& m = *impl_;
+  size_t qpos = 0, mpos = 0;
+  const std::string bad = m.checkLoop(c, &qpos, &mpos);
+  if (!bad.empty()) return Status::Error(bad);
+  for (const Impl::Edge& e : m.loops)
+    if (e.from == mpos && e.to == qpos)
+      return Status::Error("loop " + describeIndex(c.query_index) + " -> " + describeIndex(c.match_index) +
+                           " is already in the graph");
+  const int qseq = m.kfs[qpos].sequence, mseq = m.kfs[mpos].sequence;
+  // loop_fusion: old_kf->sequence != cur_kf->sequence && sequence_loop[cur_kf->sequence] == 0
+  if (qseq != mseq && !m.seq_anchored[qseq]) m.anchorSequence(c, qpos, mpos);
+  Impl::Edge e;
+  e.from = mpos;
+  e.to = qpos;
+  e.loop = c;
+  m.setLoopCost(e);
+  m.loops.push_back(std::move(e));
+  m.seq_parent[m.root(qseq)] = m.root(mseq);
+  ++m.revision;
+  return Status::Ok();
+}
+
+size_t PoseGraph::loopCount() const { return impl_->loops.size(); }
+
+bool PoseGraph::connected(size_t a, size_t b) const {
+  return impl_->root(impl_->kfs[a].sequence) == impl_->root(impl_->kfs[b].sequence);
+}
+
+uint64_t PoseGraph::revision() const { return impl_->revision; }
+
+bool PoseGraph::estimate(int64_t index, Pose* pose) const {
+  size_t pos;
+  if (!impl_->find(index, &pos)) return false;
+  *pose = impl_->poseFromState(impl_->x[pos], impl_->kfs[pos]);
+  return true;
+}
+
+std::vector<TrajectoryPoint> PoseGraph::trajectory() const {
+  const Impl& m = *impl_;
+  std::vector<TrajectoryPoint> out(m.kfs.size());
+  for (size_t p = 0; p < m.kfs.size(); ++p) {
+    out[p].index = m.kfs[p].index;
+    out[p].stamp = m.kfs[p].stamp;
+    out[p].sequence = m.kfs[p].sequence;
+    out[p].vio = m.kfs[p].vio;
+    out[p].estimate = m.poseFromState(m.x[p], m.kfs[p]);
+  }
+  return out;
+}
+
+double PoseGraph::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+  return impl_->innovation(c, qpos, mpos);
+}
+
+double PoseGraph::pathLength(size_t from, size_t to) const { return impl_->pathLength(from, to); }
+
+TrialSolution PoseGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandidate* candidate,
+                                     bool robust_candidate, int max_iterations, double time_budget_ms) {
+  Impl& m = *impl_;
+  Impl::Edge extra;
+  if (candidate) {
+    extra.from = mpos;
+    extra.to = qpos;
+    extra.loop = *candidate;
+    m.setLoopCost(extra);
+  }
+  Impl::Trial tr;
+  m.buildTrial(tr, m.windowStart(mpos), m.root(m.kfs[qpos].sequence), false, candidate ? &extra : nullptr,
+               robust_candidate ? m.huber.get() : nullptr);
+  TrialSolution out;
+  out.summary = m.solve(tr, max_iterations, time_budget_ms);
+  out.positions = std::move(tr.positions);
+  out.states = std::move(tr.states);
+  return out;
+}
+
+int PoseGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* before,
+                               Eigen::Matrix3Xd* after) const {
+  const Impl& m = *impl_;
+  std::vector<size_t> scored;
+  for (size_t i = 0; i < solution.positions.size(); ++i)
+    if (m.kfs[solution.positions[i]].sequence != 0) scored.push_back(i);
+  before->resize(3, scored.size());
+  after->resize(3, scored.size());
+  for (size_t k = 0; k < scored.size(); ++k) {
+    const size_t i = scored[k];
+    const KeyframeState& b = m.x[solution.positions[i]];
+    const KeyframeState& a = solution.states[i];
+    before->col(k) << b.t[0], b.t[1], b.t[2];
+    after->col(k) << a.t[0], a.t[1], a.t[2];
+  }
+  return static_cast<int>(scored.size());
+}
+
+void PoseGraph::adopt(const TrialSolution& solution) { impl_->adopt(solution.positions, solution.states); }
+
+BatchSolveResult PoseGraph::solveLikeLoopFusion(int max_iterations) const {
+  Impl& m = *impl_;
+  BatchSolveResult r;
+  r.poses.resize(m.kfs.size());
+  for (size_t p = 0; p < m.kfs.size(); ++p) r.poses[p] = m.kfs[p].vio;
+  if (m.loops.empty()) {
+    r.ok = true;
+    r.message = "no loops: the VIO trajectory";
+    return r;
+  }
+  size_t first = m.kfs.size();
+  for (const Impl::Edge& e : m.loops) first = std::min(first, e.from);
+  Impl::Trial tr;
+  m.buildTrial(tr, first, -1, true, nullptr, nullptr);
+  const SolveSummary o = m.solve(tr, max_iterations, 0.0);
+  r.iterations = o.iterations;
+  r.solve_ms = o.solve_ms;
+  r.free_keyframes = static_cast<int>(tr.positions.size());
+  r.message = o.message;
+  r.ok = o.finite;
+  if (!r.ok) return r;
+  for (size_t i = 0; i < tr.positions.size(); ++i)
+    r.poses[tr.positions[i]] = m.poseFromState(tr.states[i], m.kfs[tr.positions[i]]);
+  return r;
+}
+
+size_t PoseGraph::solveCount() const { return impl_->solves; }
+
+}  // namespace core
+}  // namespace rover_loop_fusion

@@ -1,0 +1,130 @@
+// The pose graph of the ROVER core: keyframes (VIO poses), odometry edges to the previous
+// `odometry_neighbours` keyframes of the same sequence (as loop_fusion), loop edges, sequences
+// (union-find; loop_fusion's first-loop anchoring shift), the current estimate X of every
+// keyframe, trial problems over a window, and loop_fusion's own batch solve.
+//
+// Used by the verifier (core/verifier.h, which adds the decision and the pending state), and
+// on its own as loop_fusion's stand-in: the graph that rover_verifier_node and rover_replay
+// solve like loop_fusion for any plugin, including accept-all.
+//
+// Edges carry an information matrix of their residual (core/cost_functions.h); today every
+// edge has unit information, loop_fusion's weighting.
+//
+// Not thread-safe: one thread at a time (core::Verifier holds a mutex around its graph).
+// Never throws for bad input: refusals come back as a Status or an error text, and leave the
+// graph unchanged.
+#pragma once
+
+#include "rover_loop_fusion/core/types.h"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace rover_loop_fusion {
+namespace core {
+
+/// The parameters of one keyframe in an optimisation. 4-DoF: yaw + t (roll and pitch stay
+/// those of the VIO pose); 6-DoF: q [w, x, y, z] + t.
+struct KeyframeState {
+  double t[3] = {0, 0, 0};
+  double yaw = 0;
+  double q[4] = {1, 0, 0, 0};
+};
+
+/// The solution of a trial problem: what verify() scores and commit() may adopt.
+struct TrialSolution {
+  std::vector<size_t> positions;      ///< optimised keyframes (positions in the graph), increasing
+  std::vector<KeyframeState> states;  ///< their solution, in the same order
+  SolveSummary summary;
+};
+
+/// Result of solveLikeLoopFusion(): the trajectory loop_fusion's own optimisation would give.
+struct BatchSolveResult {
+  bool ok = false;
+  std::string message;
+  int iterations = 0;
+  double solve_ms = 0.0;
+  int free_keyframes = 0;
+  std::vector<Pose> poses;  ///< one per keyframe, in trajectory() order
+};
+
+class PoseGraph {
+ public:
+  /// Reads mode, odometry_neighbours, loop_huber, function_tolerance, quaternion_tolerance,
+  /// window_margin, max_relative_translation, max_relative_yaw and anchor_incoming_keyframes.
+  /// The config is used as given (validate it first).
+  explicit PoseGraph(const VerifierConfig& config = VerifierConfig());
+  ~PoseGraph();
+  PoseGraph(const PoseGraph&) = delete;
+  PoseGraph& operator=(const PoseGraph&) = delete;
+
+  const VerifierConfig& config() const { return config_; }
+
+  // ---- keyframes ----------------------------------------------------------------------------
+  /// Registers a keyframe. Indices must be strictly increasing (loop_fusion's global index),
+  /// stamps strictly increasing within a sequence, sequences non-decreasing; the pose must be
+  /// finite with a unit quaternion. Refused input leaves the graph unchanged.
+  Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
+                     const Eigen::Quaterniond& q);
+  size_t keyframeCount() const;
+  bool hasKeyframe(int64_t index) const;
+  /// Position (0 = oldest) of the keyframe with this index; false if unknown.
+  bool find(int64_t index, size_t* position) const;
+  int sequenceAt(size_t position) const;
+
+  // ---- loops --------------------------------------------------------------------------------
+  /// Empty if the candidate can be used as a loop edge (known keyframes, match older than
+  /// query, finite and plausible relative pose); otherwise why not. Fills the positions.
+  std::string checkLoop(const LoopCandidate& c, size_t* query_pos, size_t* match_pos) const;
+  /// Adds the loop edge (no solve; X unchanged). A first loop between two sequences anchors
+  /// the query's sequence to the match's frame exactly as loop_fusion shifts it
+  /// (w_r_vio / w_t_vio). Refuses what checkLoop() refuses and a loop already in the graph.
+  Status addLoop(const LoopCandidate& c);
+  size_t loopCount() const;
+  /// Whether the two keyframes' sequences are tied together by loops (a trajectory prior).
+  bool connected(size_t a, size_t b) const;
+  /// Changes with every loop added: a trial solution of an older revision is stale.
+  uint64_t revision() const;
+
+  // ---- the estimate X -------------------------------------------------------------------------
+  bool estimate(int64_t index, Pose* pose) const;
+  std::vector<TrajectoryPoint> trajectory() const;
+  /// |t_meas - t_X|: where the candidate puts the query in the match's frame vs where X has it [m].
+  double innovation(const LoopCandidate& c, size_t query_pos, size_t match_pos) const;
+  /// Shortest odometry path [m] between two keyframes through the graph: along a sequence by
+  /// arc length, across accepted loops for free. Infinite if nothing connects them.
+  double pathLength(size_t from, size_t to) const;
+
+  // ---- optimisation ---------------------------------------------------------------------------
+  /// Solves the window [match - window_margin, newest] of the query's connected sequences,
+  /// warm-started from X, with `candidate` as an extra loop edge (nullptr: none; robust: with
+  /// the committed loops' Huber loss). The window's first keyframe and sequence 0 are held
+  /// fixed, older keyframes too. Does not change the graph. time_budget_ms <= 0: no limit.
+  TrialSolution solveWindow(size_t match_pos, size_t query_pos, const LoopCandidate* candidate,
+                            bool robust_candidate, int max_iterations, double time_budget_ms);
+  /// Positions of the keyframes of a solution that may move (not sequence 0), in X (`before`)
+  /// and in the solution (`after`), 3 x N each. Returns N.
+  int scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* before,
+                      Eigen::Matrix3Xd* after) const;
+  /// X := the solution; keyframes added after the solution was computed follow the
+  /// correction of the newest solved keyframe.
+  void adopt(const TrialSolution& solution);
+  /// Solves the whole graph as loop_fusion's optimize4DoF/optimize6DoF does: keyframes from
+  /// the earliest loop's match on, initialised from the VIO poses, that keyframe and sequence
+  /// 0 held fixed, committed loops with Huber loss, `max_iterations` (loop_fusion: 5).
+  /// Does not change the graph.
+  BatchSolveResult solveLikeLoopFusion(int max_iterations = 5) const;
+  /// Ceres solves run so far (diagnostics for tests and benchmarks).
+  size_t solveCount() const;
+
+ private:
+  struct Impl;
+  VerifierConfig config_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace core
+}  // namespace rover_loop_fusion
