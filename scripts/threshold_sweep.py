@@ -25,10 +25,9 @@ def sweep_cases(environment, quick=False):
     return chosen[:4] if quick else chosen
 
 
-def replay(case_dir, mode, out, threshold, per_metre, params):
-    gate = ["--max_innovation", params["max_innovation"], "--max_innovation_per_metre", params["max_innovation_per_metre"]]
-    run = bench.replay(case_dir, out, "sequential", ["--mode", mode, "--threshold", threshold, "--threshold_per_metre",
-                                                     per_metre, "--time_budget_ms", 0] + gate)
+def replay(case_dir, mode, out, threshold, per_metre, environment):
+    run = bench.replay(case_dir, out, "sequential", bench.shipped(environment, "--mode", mode, "--threshold", threshold,
+                                                                  "--threshold_per_metre", per_metre, "--time_budget_ms", 0))
     j = bench.labelled(run, os.path.join(case_dir, "candidates.csv"))
     return metrics.decision_metrics(j["label"], j["accepted"])
 
@@ -55,7 +54,7 @@ def main(argv=None):
     rows = []
     with ThreadPoolExecutor(max_workers=a.jobs) as pool:
         for th in thresholds:
-            jobs = {n: pool.submit(replay, d, mode, os.path.join(a.out, "runs", f"{n}_t{th:g}"), th, a.per_metre, params)
+            jobs = {n: pool.submit(replay, d, mode, os.path.join(a.out, "runs", f"{n}_t{th:g}"), th, a.per_metre, a.environment)
                     for n, (d, mode) in dirs.items()}
             tp = fp = fn = 0
             notes = []

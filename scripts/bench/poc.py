@@ -43,7 +43,6 @@ TRAJ_COLUMNS = [("case", "case", ""), ("ate_odometry", "odometry", ".2f"),
 
 def run_case(job):
     case, out, snapshots = job
-    params = bench.defaults(case.environment)
     s = case.build()
     d = os.path.join(out, "scenarios", case.name)
     scenario.write(s, d)
@@ -52,13 +51,13 @@ def run_case(job):
     row = {"environment": case.environment}
     for p in ("oracle", "none"):
         run = bench.replay(d, os.path.join(out, "runs", case.name, p), p,
-                           ["--mode", "4dof", "--threshold", params["threshold"], "--time_budget_ms", 0] + bench.GATE_OFF)
+                           bench.shipped(case.environment, "--mode", "4dof", "--time_budget_ms", 0, *bench.GATE_OFF))
         j = bench.labelled(run, labels)
         r = metrics.ranking_metrics(j["label"], j["score"])
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
     prob = problem.from_scenario(s, drift_model.MODELS[case.environment], "4dof")
-    info, rows = methods.evaluate(case, d, prob, [], params, out, methods=("rover", "accept_all"), snapshots=snapshots)
+    info, rows = methods.evaluate(case, d, prob, [], out, methods=("rover", "accept_all"), snapshots=snapshots)
     row.update(info)
     for r in rows:
         if r["method"].startswith("rover"):

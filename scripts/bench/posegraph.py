@@ -62,8 +62,8 @@ def run_case(job):
     scenario.write(g2o.to_scenario(graph, true_loops, outliers, truth, seed=k["seed"],
                                    meta={"outliers": k["kind"], "fraction": k["fraction"]}), d)
     prob = problem.from_g2o(graph, g2o.ordered_candidates(true_loops, outliers, k["seed"]), truth)
-    info, rows = methods.evaluate(case, d, prob, ["--max_relative_yaw_deg", 180], bench.defaults("outdoor"), out,
-                                  snapshots=snapshots, time_limit=time_limit)
+    info, rows = methods.evaluate(case, d, prob, ["--max_relative_yaw_deg", 180], out, snapshots=snapshots,
+                                  time_limit=time_limit)
     info.update(graph=k["graph"], kind=k["kind"], pct=int(round(100 * k["fraction"])))
     print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
                                          if r["method"] in ("rover+lf", "pcm+lf", "ipc+lf", "gnc", "dcs")), flush=True)
@@ -140,8 +140,8 @@ def main(argv=None):
     bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
                          ("Cases", wide, CASE_COLUMNS),
                          ("Decisions", wide, methods.decision_columns(SELECTIONS)),
-                         ("ATE [m]", wide, methods.trajectory_columns(SELECTIONS, "ate")),
-                         ("tATE [m]", wide, methods.trajectory_columns(SELECTIONS, "tate"))], a.out, notes)
+                         ("ATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "ate")),
+                         ("tATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "tate"))], a.out, notes)
     for name in graphs:
         plot(wide, name, os.path.join(a.out, f"{name}.png"))
     print(f"wrote {a.out}/summary.csv, cases.csv, summary.md, " + ", ".join(f"{n}.png" for n in graphs))

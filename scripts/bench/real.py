@@ -45,14 +45,14 @@ def run_case(job):
     curves = {}
     for p in ("oracle", "none"):
         run = bench.replay(d, os.path.join(out, "runs", case.name, p), p,
-                           ["--mode", mode, "--alignment", alignment, "--threshold", params["threshold"],
-                            "--time_budget_ms", 0] + bench.GATE_OFF)
+                           bench.shipped(env, "--mode", mode, "--alignment", alignment, "--time_budget_ms", 0,
+                                         *bench.GATE_OFF))
         j = bench.labelled(run, os.path.join(d, "candidates.csv"))
         r = metrics.ranking_metrics(j["label"], j["score"])
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
     prob = problem.from_scenario(s, drift_model.MODELS[env], mode)
-    info, rows = methods.evaluate(case, d, prob, ["--alignment", alignment], params, out, snapshots=snapshots,
+    info, rows = methods.evaluate(case, d, prob, ["--alignment", alignment], out, snapshots=snapshots,
                                   time_limit=time_limit)
     row.update(info)
     print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
@@ -111,8 +111,8 @@ def main(argv=None):
     bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
                          ("Cases", wide, CASE_COLUMNS),
                          ("Decisions", wide, methods.decision_columns(SELECTIONS)),
-                         ("ATE [m]", wide, methods.trajectory_columns(SELECTIONS, "ate")),
-                         ("tATE [m]", wide, methods.trajectory_columns(SELECTIONS, "tate"))], a.out, notes)
+                         ("ATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "ate")),
+                         ("tATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "tate"))], a.out, notes)
     panels = [(r["case"], [(p, cv[p]) for p in ("oracle", "none") if cv[p]["recall"].size]) for r, _, cv in results]
     metrics.plot_pr_grid([p for p in panels if p[1]], os.path.join(a.out, "pr_real.png"), ncols=4,
                          suptitle="Real drift: precision-recall of the ROVER score (positives: true loops)")

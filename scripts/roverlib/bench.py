@@ -109,16 +109,21 @@ def write_summary(rows, path):
 
 def defaults(environment):
     """The decision parameters of config/rover_<environment>.yaml (indoor, outdoor) as a dict,
-    so that the benchmarks decide exactly as the shipped configuration does."""
+    for tables and titles (the runs themselves read the whole file: shipped())."""
     import yaml
-    with open(os.path.join(ROOT, "config", f"rover_{environment}.yaml")) as f:
+    with open(config_path(environment)) as f:
         c = yaml.safe_load(f)
     return {k: float(c[k]) for k in DECISION_KEYS}
 
 
-def decision_args(params):
-    """rover_replay flags for a dict from defaults()."""
-    return [x for k in DECISION_KEYS for x in (f"--{k}", params[k])]
+def config_path(environment):
+    return os.path.join(ROOT, "config", f"rover_{environment}.yaml")
+
+
+def shipped(environment, *overrides):
+    """rover_replay flags that run the shipped configuration of `environment` (every parameter
+    of config/rover_<environment>.yaml), then `overrides` (flags after --config win)."""
+    return ["--config", config_path(environment)] + list(overrides)
 
 
 def tool(name):

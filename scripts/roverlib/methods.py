@@ -1,8 +1,8 @@
 """Every method of a benchmark case, on the same candidates in the same order, and what each
 gets (one summary row per method and back end):
 
-  rover       rover_replay, sequential, at the shipped defaults of the case's environment
-              (config/rover_<env>.yaml: threshold and innovation gate; time budget lifted);
+  rover       rover_replay, sequential, at the shipped configuration of the case's environment
+              (--config config/rover_<env>.yaml; time budget lifted);
   accept_all  every candidate (loop_fusion without a verifier);
   pcm, ipc    the incremental peers (roverlib/peers.py) with the problem's covariances;
   gnc, dcs    gtsam's batch robust back ends (roverlib/robust.py), under a time limit;
@@ -31,7 +31,7 @@ from . import bench, metrics, peers, robust
 # so that, with --protocol none, the run is just loop_fusion's back end on the scenario's
 # candidates (its accept-all graph): how any selection is solved with loop_fusion's back end.
 LF_ONLY = ["--max_innovation", 1e-9, "--max_innovation_per_metre", 0, "--max_relative_yaw_deg", 180,
-           "--max_relative_translation", 1e6, "--time_budget_ms", 0]
+           "--max_relative_translation", 100, "--time_budget_ms", 0]
 ALL_METHODS = ("rover", "accept_all", "pcm", "ipc", "gnc", "dcs")
 
 
@@ -109,8 +109,8 @@ def sets_at(sizes, loops, per_candidate):
     return out
 
 
-def evaluate(case, scn_dir, problem, replay_args, params, out_dir, methods=ALL_METHODS, snapshots=10,
-             time_limit=600.0, align="se3"):
+def evaluate(case, scn_dir, problem, replay_args, out_dir, methods=ALL_METHODS, snapshots=10, time_limit=600.0,
+             align="se3"):
     """Runs every method on one case. Returns (info: dict for the family's case table,
     rows: summary rows, one per method and back end)."""
     mode = "4dof" if problem.dof in (3, 4) else "6dof"
@@ -120,7 +120,7 @@ def evaluate(case, scn_dir, problem, replay_args, params, out_dir, methods=ALL_M
     runs = os.path.join(out_dir, "runs", case.name)
     # ROVER, sequential, the product's mode
     seq = bench.replay(scn_dir, os.path.join(runs, "rover"), "sequential",
-                       ["--mode", mode] + replay_args + bench.decision_args(params) + ["--time_budget_ms", 0], snapshots)
+                       bench.shipped(case.environment, "--mode", mode, *replay_args, "--time_budget_ms", 0), snapshots)
     gt = metrics.read_tum(os.path.join(seq, "groundtruth.tum"))
     stamps = np.array(gt.timestamps)
     j = bench.labelled(seq, os.path.join(scn_dir, "candidates.csv"))
