@@ -1,12 +1,13 @@
 // Fuzzes the verifier's API with arbitrary call sequences and values: keyframes with
-// duplicate, out-of-order or negative indices, NaN/inf/huge positions, non-unit quaternions,
-// stamps going backwards; candidates to unknown, future or the same keyframes; commits of
-// anything. Besides crashes and sanitizer reports it traps on broken invariants:
+// duplicate, out-of-order or negative indices, NaN/inf/huge positions, position and stamp jumps
+// (refused, or accepted as relocations), non-unit quaternions, stamps going backwards;
+// candidates to unknown, future or the same keyframes; commits of anything. Besides crashes
+// and sanitizer reports it traps on broken invariants:
 //   - a refused keyframe or commit leaves the graph unchanged;
 //   - verify() never changes the graph;
 //   - an accepted verdict is either `accepted` (converged, score <= threshold) or
 //     `no_trajectory_prior` (by policy); a rejected one never says `accepted`;
-//   - every estimate stays finite.
+//   - every estimate stays finite, no path length is infinite.
 #include "rover_loop_fusion/core/geometry.h"
 #include "rover_loop_fusion/core/verifier.h"
 
@@ -106,6 +107,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   cfg.odometry_neighbours = in.ConsumeIntegralInRange<int>(1, 4);
   cfg.threshold_per_metre = in.ConsumeBool() ? 0.01 : 0.0;
   cfg.anchor_incoming_keyframes = in.ConsumeBool();
+  cfg.max_keyframe_jump = in.ConsumeBool() ? 10.0 : 2.0;  // 2 m: segments (relocations) are frequent
+  cfg.jump_confirmations = in.ConsumeIntegralInRange<int>(2, 4);
   cfg.max_iterations = 8;      // keep one input fast
   cfg.time_budget_ms = 50.0;
   Verifier v(cfg);
@@ -143,6 +146,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         const Verdict vd = v.verify(c);
         CHECK(snapshot(v) == before);
         CHECK(!vd.detail.empty());
+        CHECK(!std::isinf(vd.path_length));  // finite input never makes a path infinite
         if (vd.accepted) ++stats.accepted;
         if (vd.reason == Reason::kScoreAboveThreshold) ++stats.rejected_by_score;
         if (vd.reason == Reason::kInvalidInput) ++stats.invalid;

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite: set-up on first use, then every gtest, rostest and pytest of the
-# package, the core gtests again under ASan+UBSan, and a short fuzz run. Ends with 'rover tests: N passed, M failed, K skipped'; exit status 1 if any test
-# failed, errored or could not run.
+# package, the core gtests again under ASan+UBSan, the concurrency tests (core and the
+# loop_fusion adapter under its threading) under ThreadSanitizer, and a short fuzz run. Ends
+# with 'rover tests: N passed, M failed, K skipped'; exit status 1 if any test failed, errored
+# or could not run.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 # The Python tests (evaluation, benchmarks) need scikit-learn, evo, gtsam: a venv on top of
@@ -18,11 +20,12 @@ grep -E '^\[( +OK|  FAILED|  PASSED|==========)|^(SUMMARY|\[ROSTEST\])|FAILURE|E
 pytest_rc=0
 ROVER_WS="$ROVER_WS" "$ROVER_PYTHON" -m pytest -q -p no:cacheprovider "$ROVER_ROOT/test/python" \
   --junitxml="$ROVER_WS/build/test_results/rover_loop_fusion/pytest-python.xml" || pytest_rc=$?
-# Hardening: the core gtests under ASan+UBSan (second build space) and the libFuzzer targets
+# Hardening: the core gtests under ASan+UBSan and the concurrency tests under TSan (each in a
+# second build space; scripts/sanitize.sh prints the time each took) and the libFuzzer targets
 # (committed corpus + ROVER_FUZZ_SECONDS of fuzzing each). Their JUnit files join the summary.
 results="$ROVER_WS/build/test_results/rover_loop_fusion"
 hardening_rc=0
-ROVER_WS="$ROVER_WS" ROVER_RESULTS="$results" "$ROVER_ROOT/scripts/sanitize.sh" || hardening_rc=$?
+ROVER_WS="$ROVER_WS" ROVER_RESULTS="$results" "$ROVER_ROOT/scripts/sanitize.sh" asan tsan || hardening_rc=$?
 ROVER_WS="$ROVER_WS" ROVER_RESULTS="$results" "$ROVER_ROOT/scripts/fuzz.sh" || hardening_rc=$?
 summary_rc=0
 /usr/bin/python3 "$ROVER_ROOT/scripts/test_summary.py" "$ROVER_WS/build/test_results" || summary_rc=$?

@@ -32,11 +32,16 @@ double scoreThreshold(const VerifierConfig& config, double path_length) {
 }
 
 Check innovationGate(const VerifierConfig& config, double innovation, double path_length) {
-  if (!(config.max_innovation > 0) || !std::isfinite(path_length)) return Check();
+  if (!(config.max_innovation > 0)) return Check();
   const double bound = config.max_innovation + config.max_innovation_per_metre * path_length;
-  if (innovation <= bound) return Check();
   std::ostringstream s;
   s.precision(3);
+  if (!std::isfinite(innovation) || !std::isfinite(path_length) || !std::isfinite(bound)) {
+    s << "innovation gate cannot decide: innovation " << innovation << " m, path length " << path_length
+      << " m (not finite): rejected";
+    return fail(Reason::kInvalidInput, s.str());
+  }
+  if (innovation <= bound) return Check();
   s << std::fixed << "innovation " << innovation << " m > " << bound << " m (" << config.max_innovation
     << " m + " << config.max_innovation_per_metre << " x " << path_length
     << " m of path): more than drift can explain";

@@ -26,7 +26,8 @@ double scoreThreshold(const VerifierConfig& config, double path_length);
 
 /// The innovation gate, before any solve: passes iff
 ///   innovation <= max_innovation + max_innovation_per_metre * path_length   [m]
-/// or the gate is off (max_innovation <= 0). Fails (kInnovationAboveBound) otherwise.
+/// or the gate is off (max_innovation <= 0). Fails (kInnovationAboveBound) otherwise, and fails
+/// closed (kInvalidInput) when an input or the bound is not finite.
 Check innovationGate(const VerifierConfig& config, double innovation, double path_length);
 
 /// The ROVER score s: RMSE of the positions `before` (X) and `after` (X*) of the scored

@@ -45,6 +45,10 @@ struct Parameter {
   bool min_open = false;        ///< (min, max]: min itself is not allowed
   std::vector<std::string> choices;  ///< kChoice
   std::string doc;                   ///< one line
+  /// Set by the host (the loop_fusion adapter or rover_verifier_node), never from a verifier
+  /// YAML: a value there is ignored with an ERROR (ros/plugins.cpp), and the shipped YAMLs do
+  /// not list it. rover_replay takes it as a flag.
+  bool host_set = false;
 
   /// The value in a config, in `unit` (the 4-DoF/6-DoF mode as "4dof"/"6dof").
   std::function<ParameterValue(const VerifierConfig&)> get;
@@ -69,7 +73,8 @@ const Parameter* findParameter(const std::string& name);
 bool assignParameter(const Parameter& p, const ParameterValue& value, VerifierConfig* config,
                      std::string* error, bool host_uses_imu = true);
 
-/// Every parameter and its value in one line ("mode 4dof, alignment se3, threshold 0.2 m, ...").
+/// Every parameter and its value in one line, in the YAML's units ("mode=4dof alignment=se3
+/// threshold=0.2 ..."): what the hosts log at start-up.
 std::string describe(const VerifierConfig& config);
 
 /// Reads a verifier parameter file: flat YAML, `key: value` per line, `#` comments, blank

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <deque>
+#include <limits>
 #include <map>
 #include <queue>
 #include <sstream>
@@ -18,6 +19,9 @@ namespace core {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// buildTrial's component for "every segment" (segment numbers are >= 0 or small negatives).
+constexpr int kEverySegment = std::numeric_limits<int>::min();
 
 bool unitQuaternion(const Eigen::Quaterniond& q, double tol) {
   return q.coeffs().allFinite() && std::abs(q.norm() - 1.0) <= tol;
@@ -39,8 +43,18 @@ struct PoseGraph::Impl {
     int64_t index;
     double stamp;
     int sequence;
+    /// Connectivity: odometry joins keyframes of one segment; loops join segments (union-find).
+    /// A sequence's first segment has the sequence's number; a keyframe jump accepted as a
+    /// relocation starts a new segment with a negative number.
+    int segment;
     Pose vio;
     double yaw, pitch, roll;  // of vio, radians
+  };
+  /// The last refused implausible keyframe and how many consecutive refused keyframes, each
+  /// plausible after the one before, end with it (0: none).
+  struct Suspect {
+    int run = 0;
+    Keyframe keyframe;
   };
   /// A relative-pose measurement between two keyframes. `information` weights its residual
   /// (core/cost_functions.h; 4-DoF: the top-left 4 x 4 block, residual order x, y, z, yaw;
@@ -65,11 +79,11 @@ struct PoseGraph::Impl {
 
   const VerifierConfig& cfg;
   std::vector<Keyframe> kfs;
-  std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's sequence
+  std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's segment
   std::vector<KeyframeState> x;
   std::vector<Edge> odometry;  // appended in increasing `to`
   std::vector<Edge> loops;
-  std::map<int, int> seq_parent;     // union-find over sequence ids
+  std::map<int, int> seg_parent;     // union-find over segments
   std::map<int, bool> seq_anchored;  // loop_fusion's sequence_loop
   std::map<int, Correction> seq_shift;  // applied to incoming poses if anchor_incoming_keyframes
   std::unique_ptr<ceres::LossFunction> huber;
@@ -77,6 +91,9 @@ struct PoseGraph::Impl {
   std::unique_ptr<compat::ParameterManifold> quaternion_manifold;
   uint64_t revision = 0;
   size_t solves = 0;
+  Suspect suspect;
+  int next_segment = -1;
+  bool warned_loaded_map_stamps = false;
 
   explicit Impl(const VerifierConfig& c)
       : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
@@ -87,7 +104,10 @@ struct PoseGraph::Impl {
 
   // ---- lookup -------------------------------------------------------------------------
   bool find(int64_t index, size_t* pos) const;
-  int root(int seq);
+  int root(int segment);
+  /// Why keyframe b cannot follow keyframe a of its sequence (too far, stamp not after a's or
+  /// too long after it); empty if it can.
+  std::string implausibleStep(const Keyframe& a, const Keyframe& b) const;
 
   // ---- poses and states ---------------------------------------------------------------
   KeyframeState stateFromPose(const Pose& p) const;
@@ -118,8 +138,8 @@ struct PoseGraph::Impl {
   /// State of position p inside the trial, or a constant block holding x[p] if p is outside.
   KeyframeState* stateFor(Trial& tr, size_t p);
   void addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss);
-  /// Builds the problem over keyframes [first, newest] whose sequence is in `component`
-  /// (-1: every sequence). from_vio: initial values from the VIO poses (loop_fusion) instead
+  /// Builds the problem over keyframes [first, newest] whose segment is in `component`
+  /// (kEverySegment: all; segment roots can be negative). from_vio: initial values from the VIO poses (loop_fusion) instead
   /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
   void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
                   ceres::LossFunction* extra_loss);
@@ -142,16 +162,38 @@ bool PoseGraph::Impl::find(int64_t index, size_t* pos) const {
   return true;
 }
 
-int PoseGraph::Impl::root(int seq) {
-  auto it = seq_parent.find(seq);
-  if (it == seq_parent.end()) {
-    seq_parent[seq] = seq;
-    return seq;
+int PoseGraph::Impl::root(int segment) {
+  auto it = seg_parent.find(segment);
+  if (it == seg_parent.end()) {
+    seg_parent[segment] = segment;
+    return segment;
   }
-  if (it->second == seq) return seq;
+  if (it->second == segment) return segment;
   const int r = root(it->second);
-  seq_parent[seq] = r;
+  seg_parent[segment] = r;
   return r;
+}
+
+std::string PoseGraph::Impl::implausibleStep(const Keyframe& a, const Keyframe& b) const {
+  std::ostringstream s;
+  s.precision(17);
+  const double jump = (b.vio.t - a.vio.t).norm();
+  if (!(jump <= cfg.max_keyframe_jump)) {
+    s.precision(6);
+    s << "position jumps " << jump << " m from keyframe " << a.index << " (max_keyframe_jump "
+      << cfg.max_keyframe_jump << " m)";
+    s.precision(17);
+  }
+  const double dt = b.stamp - a.stamp;
+  if (!(dt > 0.0) || !(dt <= cfg.max_stamp_jump)) {
+    if (!s.str().empty()) s << "; ";
+    if (!(dt > 0.0))
+      s << "out of order: stamp " << b.stamp << " not after the previous keyframe's " << a.stamp << " in sequence " << a.sequence;
+    else
+      s << "stamp " << b.stamp << " is " << dt << " s after keyframe " << a.index << "'s (max_stamp_jump "
+        << cfg.max_stamp_jump << " s)";
+  }
+  return s.str();
 }
 
 KeyframeState PoseGraph::Impl::stateFromPose(const Pose& p) const {
@@ -271,7 +313,8 @@ std::string PoseGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos, siz
       << cfg.max_relative_translation << " m";
     return s.str();
   }
-  if (std::abs(wrapAngle(c.relative_yaw)) > cfg.max_relative_yaw) {
+  // The yaw as handed in is what the loop edge uses: checked unwrapped (20 pi is not 0).
+  if (!(std::abs(c.relative_yaw) <= cfg.max_relative_yaw)) {
     std::ostringstream s;
     s << "relative yaw " << c.relative_yaw * 180.0 / M_PI << " deg exceeds max_relative_yaw "
       << cfg.max_relative_yaw * 180.0 / M_PI << " deg";
@@ -314,7 +357,7 @@ void PoseGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool fr
   tr.first = first;
   tr.local.assign(kfs.size() - first, -1);
   for (size_t p = first; p < kfs.size(); ++p) {
-    if (component >= 0 && root(kfs[p].sequence) != component) continue;
+    if (component != kEverySegment && root(kfs[p].segment) != component) continue;
     tr.local[p - first] = static_cast<int>(tr.positions.size());
     tr.positions.push_back(p);
     tr.states.push_back(from_vio ? stateFromPose(kfs[p].vio) : x[p]);
@@ -385,7 +428,7 @@ double PoseGraph::Impl::pathLength(size_t from, size_t to) const {
   };
   std::vector<std::vector<std::pair<int, double>>> adj(n);
   for (size_t i = 1; i < n; ++i) {
-    if (kfs[nodes[i - 1]].sequence != kfs[nodes[i]].sequence) continue;
+    if (kfs[nodes[i - 1]].segment != kfs[nodes[i]].segment) continue;
     const double d = arc[nodes[i]] - arc[nodes[i - 1]];
     adj[i - 1].emplace_back(static_cast<int>(i), d);
     adj[i].emplace_back(static_cast<int>(i - 1), d);
@@ -427,9 +470,9 @@ void PoseGraph::Impl::adopt(const std::vector<size_t>& positions,
   const size_t last = positions.back();
   const Correction c = correctionBetween(x[last], states.back(), kfs[last]);
   for (size_t i = 0; i < positions.size(); ++i) x[positions[i]] = states[i];
-  const int comp = root(kfs[last].sequence);
+  const int comp = root(kfs[last].segment);
   for (size_t p = last + 1; p < kfs.size(); ++p) {
-    if (root(kfs[p].sequence) == comp) x[p] = applyCorrection(c, x[p], kfs[p]);
+    if (root(kfs[p].segment) == comp) x[p] = applyCorrection(c, x[p], kfs[p]);
   }
 }
 
@@ -469,34 +512,33 @@ PoseGraph::~PoseGraph() = default;
 Status PoseGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                               const Eigen::Quaterniond& q) {
   Impl& m = *impl_;
-  if (index < 0) return Status::Error("keyframe " + describeIndex(index) + ": negative index");
-  if (sequence < 0) return Status::Error("keyframe " + describeIndex(index) + ": negative sequence");
-  if (!t.allFinite()) return Status::Error("keyframe " + describeIndex(index) + ": position is not finite");
-  if (!std::isfinite(stamp)) return Status::Error("keyframe " + describeIndex(index) + ": stamp is not finite");
-  if (!unitQuaternion(q, config_.quaternion_tolerance))
-    return Status::Error("keyframe " + describeIndex(index) + ": orientation is not a unit quaternion");
+  const std::string who = "keyframe " + describeIndex(index) + ": ";
+  if (index < 0) return Status::Error(who + "negative index");
+  if (sequence < 0) return Status::Error(who + "negative sequence");
+  if (!t.allFinite()) return Status::Error(who + "position is not finite");
+  if (!(t.cwiseAbs().maxCoeff() <= kMaxCoordinate)) {
+    std::ostringstream s;
+    s << who << "position (" << t.x() << ", " << t.y() << ", " << t.z() << ") beyond " << kMaxCoordinate
+      << " m from the origin: not a VIO pose";
+    return Status::Error(s.str());
+  }
+  if (!std::isfinite(stamp)) return Status::Error(who + "stamp is not finite");
+  if (!unitQuaternion(q, config_.quaternion_tolerance)) return Status::Error(who + "orientation is not a unit quaternion");
+  const Impl::Keyframe* prev = nullptr;  // the previous keyframe of this sequence
   if (!m.kfs.empty()) {
     const Impl::Keyframe& last = m.kfs.back();
-    if (index == last.index) return Status::Error("keyframe " + describeIndex(index) + ": duplicate index");
-    if (index < last.index)
-      return Status::Error("keyframe " + describeIndex(index) + ": index older than the newest keyframe " +
-                           describeIndex(last.index));
+    if (index == last.index) return Status::Error(who + "duplicate index");
+    if (index < last.index) return Status::Error(who + "index older than the newest keyframe " + describeIndex(last.index));
     if (sequence < last.sequence)
-      return Status::Error("keyframe " + describeIndex(index) + ": sequence " + std::to_string(sequence) +
-                           " after sequence " + std::to_string(last.sequence));
-    if (sequence == last.sequence && !(stamp > last.stamp)) {
-      std::ostringstream s;
-      s.precision(17);
-      s << "keyframe " << index << ": stamp " << stamp << " not after the previous keyframe's "
-        << last.stamp << " in sequence " << sequence;
-      return Status::Error(s.str());
-    }
+      return Status::Error(who + "sequence " + std::to_string(sequence) + " after sequence " + std::to_string(last.sequence));
+    if (sequence == last.sequence) prev = &last;
   }
 
   Impl::Keyframe kf;
   kf.index = index;
   kf.stamp = stamp;
   kf.sequence = sequence;
+  kf.segment = prev ? prev->segment : sequence;
   kf.vio = Pose(t, q.normalized());
   if (config_.anchor_incoming_keyframes) {
     auto shift = m.seq_shift.find(sequence);
@@ -504,32 +546,75 @@ Status PoseGraph::addKeyframe(int64_t index, double stamp, int sequence, const E
   }
   m.setYawPitchRoll(kf);
 
+  Status status = Status::Ok();
+  if (prev && sequence == 0) {
+    // A loaded map (held fixed): loop_fusion saves its keyframes by index, sessions one after
+    // another, so stamps need not increase. Kept; said once.
+    if (!(stamp > prev->stamp) && !m.warned_loaded_map_stamps) {
+      m.warned_loaded_map_stamps = true;
+      std::ostringstream s;
+      s.precision(17);
+      s << who << "stamp " << stamp << " not after the previous keyframe's " << prev->stamp
+        << " in sequence 0 (a loaded map, held fixed, may be saved out of time order): kept; stamps of "
+           "sequence 0 are not checked further";
+      status = Status::Warning(s.str());
+    }
+  } else if (prev) {
+    // A live sequence: a keyframe far from the previous one or stamped implausibly is refused,
+    // unless it is the last of `jump_confirmations` consecutive keyframes that each follow the
+    // one before plausibly: then the VIO really relocated (a new segment) or the clock jumped.
+    const std::string implausible = m.implausibleStep(*prev, kf);
+    if (!implausible.empty()) {
+      Impl::Suspect& sp = m.suspect;
+      const bool follows = sp.run > 0 && sp.keyframe.sequence == sequence &&
+                           m.implausibleStep(sp.keyframe, kf).empty();
+      const int run = follows ? sp.run + 1 : 1;
+      if (run < config_.jump_confirmations) {
+        sp.run = run;
+        sp.keyframe = kf;
+        const int more = config_.jump_confirmations - run;
+        return Status::Error(who + implausible + ": refused; " + std::to_string(more) + " more consecutive " +
+                             (more == 1 ? "keyframe" : "keyframes") +
+                             " consistent with it would be taken as a relocation (jump_confirmations)");
+      }
+      const bool relocated = !((kf.vio.t - prev->vio.t).norm() <= config_.max_keyframe_jump);
+      if (relocated) kf.segment = m.next_segment--;
+      status = Status::Warning(
+          who + implausible + ": accepted after " + std::to_string(run) + " consecutive keyframes agreed (" +
+          (relocated ? "the VIO relocated: a new segment of sequence " + std::to_string(sequence) +
+                           " starts here, without odometry to the keyframes before; loops across the jump "
+                           "have no trajectory prior until one ties the two"
+                     : "a new clock") +
+          ")");
+    }
+  }
+  m.suspect.run = 0;
+
   // X of the new keyframe: its VIO pose carried by the current drift correction of the
   // previous keyframe of the same sequence (loop_fusion's r_drift / t_drift).
   KeyframeState s = m.stateFromPose(kf.vio);
   const size_t pos = m.kfs.size();
-  const bool continues = pos > 0 && m.kfs.back().sequence == sequence;
-  if (continues) {
-    const Impl::Keyframe& prev = m.kfs.back();
-    const Correction drift = m.correctionBetween(m.stateFromPose(prev.vio), m.x.back(), prev);
+  if (prev) {
+    const Correction drift = m.correctionBetween(m.stateFromPose(prev->vio), m.x.back(), *prev);
     s = m.applyCorrection(drift, s, kf);
   }
-  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - m.kfs.back().vio.t).norm() : 0.0);
-  m.kfs.push_back(kf);
+  const bool continues = prev && prev->segment == kf.segment;
+  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - prev->vio.t).norm() : 0.0);
+  m.kfs.push_back(kf);  // (prev is not used below: push_back may move it)
   m.x.push_back(s);
-  m.root(sequence);
+  m.root(kf.segment);
   const int n = std::max(0, config_.odometry_neighbours);
   for (int j = n; j >= 1; --j) {
     if (pos < static_cast<size_t>(j)) continue;
     const size_t from = pos - j;
-    if (m.kfs[from].sequence != sequence) continue;
+    if (m.kfs[from].segment != kf.segment) continue;
     Impl::Edge e;
     e.from = from;
     e.to = pos;
     m.setOdometryCost(e);
     m.odometry.push_back(std::move(e));
   }
-  return Status::Ok();
+  return status;
 }
 
 size_t PoseGraph::keyframeCount() const { return impl_->kfs.size(); }
@@ -565,7 +650,7 @@ Status PoseGraph::addLoop(const LoopCandidate& c) {
   e.loop = c;
   m.setLoopCost(e);
   m.loops.push_back(std::move(e));
-  m.seq_parent[m.root(qseq)] = m.root(mseq);
+  m.seg_parent[m.root(m.kfs[qpos].segment)] = m.root(m.kfs[mpos].segment);
   ++m.revision;
   return Status::Ok();
 }
@@ -573,7 +658,7 @@ Status PoseGraph::addLoop(const LoopCandidate& c) {
 size_t PoseGraph::loopCount() const { return impl_->loops.size(); }
 
 bool PoseGraph::connected(size_t a, size_t b) const {
-  return impl_->root(impl_->kfs[a].sequence) == impl_->root(impl_->kfs[b].sequence);
+  return impl_->root(impl_->kfs[a].segment) == impl_->root(impl_->kfs[b].segment);
 }
 
 uint64_t PoseGraph::revision() const { return impl_->revision; }
@@ -615,7 +700,7 @@ TrialSolution PoseGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandida
     m.setLoopCost(extra);
   }
   Impl::Trial tr;
-  m.buildTrial(tr, m.windowStart(mpos), m.root(m.kfs[qpos].sequence), false, candidate ? &extra : nullptr,
+  m.buildTrial(tr, m.windowStart(mpos), m.root(m.kfs[qpos].segment), false, candidate ? &extra : nullptr,
                robust_candidate ? m.huber.get() : nullptr);
   TrialSolution out;
   out.summary = m.solve(tr, max_iterations, time_budget_ms);
@@ -657,7 +742,7 @@ BatchSolveResult PoseGraph::solveLikeLoopFusion(int max_iterations) const {
   size_t first = m.kfs.size();
   for (const Impl::Edge& e : m.loops) first = std::min(first, e.from);
   Impl::Trial tr;
-  m.buildTrial(tr, first, -1, true, nullptr, nullptr);
+  m.buildTrial(tr, first, kEverySegment, true, nullptr, nullptr);
   const SolveSummary o = m.solve(tr, max_iterations, 0.0);
   r.iterations = o.iterations;
   r.solve_ms = o.solve_ms;

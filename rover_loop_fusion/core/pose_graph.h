@@ -26,6 +26,10 @@
 namespace rover_loop_fusion {
 namespace core {
 
+/// Keyframe positions beyond this distance from the origin along any axis [m] are not VIO
+/// poses (and their squares would overflow path lengths): refused.
+constexpr double kMaxCoordinate = 1e8;
+
 /// The parameters of one keyframe in an optimisation. 4-DoF: yaw + t (roll and pitch stay
 /// those of the VIO pose); 6-DoF: q [w, x, y, z] + t.
 struct KeyframeState {
@@ -54,8 +58,9 @@ struct BatchSolveResult {
 class PoseGraph {
  public:
   /// Reads mode, odometry_neighbours, loop_huber, function_tolerance, quaternion_tolerance,
-  /// window_margin, max_relative_translation, max_relative_yaw and anchor_incoming_keyframes.
-  /// The config is used as given (validate it first).
+  /// window_margin, max_relative_translation, max_relative_yaw, anchor_incoming_keyframes,
+  /// max_keyframe_jump, max_stamp_jump and jump_confirmations. The config is used as given
+  /// (validate it first).
   explicit PoseGraph(const VerifierConfig& config = VerifierConfig());
   ~PoseGraph();
   PoseGraph(const PoseGraph&) = delete;
@@ -65,8 +70,13 @@ class PoseGraph {
 
   // ---- keyframes ----------------------------------------------------------------------------
   /// Registers a keyframe. Indices must be strictly increasing (loop_fusion's global index),
-  /// stamps strictly increasing within a sequence, sequences non-decreasing; the pose must be
-  /// finite with a unit quaternion. Refused input leaves the graph unchanged.
+  /// sequences non-decreasing; the pose must be finite (within kMaxCoordinate) with a unit
+  /// quaternion. Within a live sequence a keyframe must follow the previous one plausibly
+  /// (max_keyframe_jump, stamp after it by at most max_stamp_jump); an implausible one is
+  /// refused unless it ends a run of jump_confirmations consistent keyframes (accepted with a
+  /// warning: a relocation starts a new segment, or a new clock). Sequence 0 (a loaded map,
+  /// held fixed) may come out of time order: kept, with one warning. Refused input leaves the
+  /// graph unchanged; ok with a message is a warning.
   Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                      const Eigen::Quaterniond& q);
   size_t keyframeCount() const;

@@ -149,21 +149,21 @@ struct VerifierConfig {
   /// outdoor). The default 0.2 m is measured, not the paper's: docs/design-notes.md.
   double threshold = 0.2;
   double threshold_per_metre = 0.0;
-  /// Upper bound of the effective threshold [m] (<= 0: none).
+  /// Upper bound of the effective threshold [m] (0: none).
   double max_threshold = 0.0;
   /// Innovation gate, checked before the trial solve: reject when the candidate puts the query
   /// keyframe farther from the current estimate than
   ///   max_innovation + max_innovation_per_metre * path_length   [m]
   /// (a drift rate over the odometry path from match to query through the graph). It catches
   /// what a diluted score misses: a look-alike next to places the graph already ties together
-  /// (innovation ~ offset, path ~ metres). max_innovation <= 0 disables the gate.
+  /// (innovation ~ offset, path ~ metres). max_innovation = 0 disables the gate.
   double max_innovation = 0.5;
   double max_innovation_per_metre = 0.02;
   /// Policy for candidates between sequences that nothing connects yet (no prior to test
   /// against). true = accept as upstream loop_fusion does when merging maps.
   bool accept_without_prior = true;
   /// Trial optimisation limits. A solve that stops on either limit did not converge and the
-  /// candidate is rejected (fail closed). time_budget_ms <= 0 disables the time limit.
+  /// candidate is rejected (fail closed). time_budget_ms = 0 disables the time limit.
   int max_iterations = 50;
   double time_budget_ms = 200.0;
   /// Relative cost change at which the trial optimisation counts as converged. 1e-4 changes
@@ -192,6 +192,16 @@ struct VerifierConfig {
   bool anchor_incoming_keyframes = false;
   /// Tolerance on | |q| - 1 | for quaternions handed in.
   double quaternion_tolerance = 1e-3;
+  /// Plausibility of the keyframe stream of a live sequence (not of sequence 0, a loaded map).
+  /// A keyframe farther than max_keyframe_jump [m] from the previous keyframe of its sequence,
+  /// or stamped not after it or more than max_stamp_jump [s] after it, is refused (one glitch,
+  /// e.g. x += 1e30 or a stamp of 4e9 s, costs one keyframe, not the session). When
+  /// jump_confirmations consecutive keyframes each follow the one before plausibly, the last of
+  /// them is accepted: after a position jump as the start of a new segment (the VIO relocated:
+  /// no odometry across the jump), after a stamp jump on the new clock.
+  double max_keyframe_jump = 10.0;
+  double max_stamp_jump = 3600.0;
+  int jump_confirmations = 3;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.

@@ -60,8 +60,13 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   const int qseq = graph_.sequenceAt(qpos), mseq = graph_.sequenceAt(mpos);
   if (!graph_.connected(qpos, mpos)) {
     std::ostringstream s;
-    s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; "
-      << (config_.accept_without_prior ? "accepted by policy (accept_without_prior)"
+    if (qseq == mseq)
+      s << "keyframes " << c.match_index << " and " << c.query_index << " of sequence " << qseq
+        << " lie on either side of a keyframe jump accepted as a relocation, which no loop ties yet: "
+           "no trajectory prior; ";
+    else
+      s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; ";
+    s << (config_.accept_without_prior ? "accepted by policy (accept_without_prior)"
                                        : "rejected by policy (accept_without_prior=false)");
     if (config_.accept_without_prior)
       return withNumbers(Verdict::Accept(c, s.str(), Reason::kNoTrajectoryPrior), measured, t0);

@@ -34,9 +34,9 @@ class Verifier {
   const VerifierConfig& config() const { return config_; }
   const std::string& configError() const { return config_error_; }
 
-  /// Registers a keyframe. Indices must be strictly increasing (loop_fusion's global index),
-  /// stamps strictly increasing within a sequence, sequences non-decreasing; the pose must be
-  /// finite with a unit quaternion. Refused input leaves the graph unchanged.
+  /// Registers a keyframe (PoseGraph::addKeyframe: the rules, the plausibility limits and the
+  /// recovery from a jump). Refused input leaves the graph unchanged; ok with a message is a
+  /// warning for the host's log.
   Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                      const Eigen::Quaterniond& q);
 

@@ -36,14 +36,14 @@ class LoopFusionAdapter {
   LoopFusionAdapter& operator=(const LoopFusionAdapter&) = delete;
 
   /// Reads the parameters from the node's private namespace (~verifier_type, ~verifier_name,
-  /// ~fallback_to_accept_all, ~verdict_log, ~marker_frame, ~publish_markers and the plugin's
-  /// ~<verifier_name>/...), loads the verifier plugin and advertises ~loop_verdicts,
-  /// ~loop_markers and ~loop_candidates. Call once, after ros::init (loop_fusion: in setIMUFlag).
-  /// use_imu: loop_fusion's 4-DoF (true) or 6-DoF (false) pose graph.
-  /// Returns true when the configured verifier runs, false in fallback mode (every loop
+  /// ~fallback_to_accept_all, ~relocalisation, ~verdict_log, ~marker_frame, ~publish_markers and
+  /// the plugin's ~<verifier_name>/...), loads the verifier plugin and advertises
+  /// ~loop_verdicts, ~loop_markers and ~loop_candidates. Call once, after ros::init
+  /// (loop_fusion: in setIMUFlag). use_imu: loop_fusion's 4-DoF (true) or 6-DoF (false) pose
+  /// graph. Returns true when the configured verifier runs, false in fallback mode (every loop
   /// accepted). If the verifier cannot start and the fallback is off, the process stops
   /// (ROS_FATAL naming the parameter, exit status 1). A second call does nothing and returns
-  /// the first result.
+  /// the first result. Never blocks on the verdict log (a FIFO is opened when a reader comes).
   bool initialize(bool use_imu);
 
   /// As initialize(), with a verifier built by the caller instead of the one named by
@@ -58,11 +58,23 @@ class LoopFusionAdapter {
   void addKeyframe(int index, double stamp, int sequence, const Eigen::Vector3d& P,
                    const Eigen::Matrix3d& R);
 
-  /// Verifies a loop candidate that passed findConnection; commits it when accepted and
-  /// publishes the verdict. The candidate itself is published on ~loop_candidates first
-  /// (rover_loop_fusion/LoopCandidate, keyframes named by stamp) so that a recorded run can be
-  /// replayed through rover_verifier_node. Returns true iff loop_fusion may use the loop; false: set
-  /// has_loop = false and skip it. inliers: the PnP inlier count, -1 if unknown.
+  /// The hook after a successful KeyFrame::findConnection: verifies the loop findConnection
+  /// has just stored in the keyframe (its has_loop, loop_index, loop_info, passed by reference)
+  /// with verifyLoop(). A loop that loop_fusion must not use is dropped from the keyframe:
+  /// has_loop = false, loop_index = -1, loop_info = 0, as a keyframe without a loop, so that
+  /// savePoseGraph does not save it (loadPoseGraph reads loop_index != -1 as a loop). Returns
+  /// true iff loop_fusion may use the loop. inliers: the PnP inlier count, -1 if unknown.
+  bool verifyKeyframeLoop(int index, int inliers, bool& has_loop, int& loop_index, LoopInfo& loop_info);
+
+  /// The hook in loadKeyFrame, after addKeyframe(): adds the stored loop of a loaded keyframe
+  /// (if has_loop) with commitStoredLoop(); a stored loop the verifier refuses is dropped from
+  /// the keyframe as in verifyKeyframeLoop(), so that both graphs hold the same loops.
+  void keepStoredLoop(int index, bool& has_loop, int& loop_index, LoopInfo& loop_info);
+
+  /// Verifies a loop candidate; commits it when accepted and publishes the verdict. The
+  /// candidate itself is published on ~loop_candidates first (rover_loop_fusion/LoopCandidate,
+  /// keyframes named by stamp) so that a recorded run can be replayed through
+  /// rover_verifier_node. Returns true iff loop_fusion may use the loop.
   bool verifyLoop(int query_index, int match_index, const LoopInfo& loop_info, int inliers = -1);
 
   /// Adds a loop stored in a loaded pose graph (loadPoseGraph) without verifying it: both

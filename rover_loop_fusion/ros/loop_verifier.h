@@ -12,6 +12,18 @@
 
 namespace rover_loop_fusion {
 
+/// What the host does with a loop between sequences that nothing connects yet (the first
+/// relocalisation into a loaded map, the first loop between two sessions): there is no
+/// trajectory prior to test it against, and it is the loop that moves a whole session.
+/// Set on the host (~relocalisation), never in the verifier's YAML.
+enum class Relocalisation {
+  kReject,            ///< reject it (default, fail closed): the sessions stay apart
+  kAcceptUnverified,  ///< use it unverified, as upstream loop_fusion does
+  // Planned: confirm it with k mutually consistent candidates (with deferred loops).
+};
+const char* toString(Relocalisation policy);  ///< "reject", "accept_unverified"
+bool parseRelocalisation(const std::string& text, Relocalisation* policy);
+
 /// What the host process tells a verifier about itself.
 struct HostInfo {
   /// 4-DoF (VIO) or 6-DoF (VO) pose graph; `mode: auto` follows this.
@@ -20,6 +32,8 @@ struct HostInfo {
   /// (loop_fusion); false: raw per-session VIO poses (rover_verifier_node), the verifier
   /// shifts them itself.
   bool shifts_sequences = true;
+  /// The host's ~relocalisation policy.
+  Relocalisation relocalisation = Relocalisation::kReject;
 };
 
 class LoopVerifier {

@@ -2,14 +2,18 @@
 //   rover_loop_fusion/TrajectoryPriorVerifier  ROVER: the trajectory-prior test (core::Verifier)
 //   rover_loop_fusion/AcceptAllVerifier        accepts every candidate, as upstream
 //                                              loop_fusion does (the A side of an A/B test)
+#include "rover_loop_fusion/core/parameters.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/ros/loop_verifier.h"
 #include "rover_loop_fusion/ros/params.h"
+#include "rover_loop_fusion/ros/verifier_host.h"
 
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/console.h>
 
+#include <cmath>
 #include <memory>
+#include <sstream>
 
 namespace rover_loop_fusion {
 
@@ -19,7 +23,12 @@ class TrajectoryPriorVerifier : public LoopVerifier {
                            const Eigen::Quaterniond& q) override {
     return verifier_->addKeyframe(index, stamp, sequence, t, q);
   }
-  core::Verdict verify(const core::LoopCandidate& c) override { return verifier_->verify(c); }
+  core::Verdict verify(const core::LoopCandidate& c) override {
+    core::Verdict v = verifier_->verify(c);
+    if (v.reason == core::Reason::kNoTrajectoryPrior)
+      v.detail += std::string("; host policy relocalisation: ") + toString(host().relocalisation);
+    return v;
+  }
   core::Status commit(const core::LoopCandidate& c) override { return verifier_->commit(c); }
   std::vector<core::TrajectoryPoint> trajectory() const override { return verifier_->trajectory(); }
 
@@ -33,13 +42,19 @@ class TrajectoryPriorVerifier : public LoopVerifier {
       setError(all);
       return false;
     }
-    if (!host().shifts_sequences) load.config.anchor_incoming_keyframes = true;
+    // Set from the host, never from a YAML (a wrong anchor_incoming_keyframes shifts every
+    // session twice under loop_fusion, or never in the node).
+    for (const std::string& key : hostDerivedVerifierParameters())
+      if (privateNodeHandle().hasParam(key))
+        ROS_ERROR("[rover] parameter %s is ignored: the host sets it (anchor_incoming_keyframes: false under "
+                  "loop_fusion, which shifts sessions itself, true in rover_verifier_node; accept_without_prior: "
+                  "from the host's ~relocalisation). Remove it from the YAML.",
+                  privateNodeHandle().resolveName(key).c_str());
+    load.config.anchor_incoming_keyframes = !host().shifts_sequences;
+    load.config.accept_without_prior = host().relocalisation == Relocalisation::kAcceptUnverified;
     verifier_.reset(new core::Verifier(load.config));
-    const core::VerifierConfig& c = verifier_->config();
-    ROS_INFO("[rover] %s: trajectory-prior verifier, %s graph, %s alignment, threshold %.2f m, "
-             "time budget %.0f ms, candidates without a prior %s",
-             name().c_str(), core::toString(c.mode), core::toString(c.alignment), c.threshold,
-             c.time_budget_ms, c.accept_without_prior ? "accepted" : "rejected");
+    ROS_INFO("[rover] %s: trajectory-prior verifier, decision parameters: %s", privateNodeHandle().getNamespace().c_str(),
+             core::describe(verifier_->config()).c_str());
     return true;
   }
 
@@ -54,13 +69,7 @@ class AcceptAllVerifier : public LoopVerifier {
     return core::Status::Ok();
   }
   core::Verdict verify(const core::LoopCandidate& c) override {
-    core::Verdict v;
-    v.query_index = c.query_index;
-    v.match_index = c.match_index;
-    v.accepted = true;
-    v.reason = core::Reason::kAccepted;
-    v.detail = "accept_all: no verification (upstream loop_fusion behaviour)";
-    return v;
+    return core::Verdict::Accept(c, "accept_all: no verification (upstream loop_fusion behaviour)");
   }
   core::Status commit(const core::LoopCandidate&) override { return core::Status::Ok(); }
 

@@ -1,13 +1,18 @@
 #include "rover_loop_fusion/ros/verifier_node.h"
 
+#include "rover_loop_fusion/core/parameters.h"
+#include "rover_loop_fusion/ros/conversions.h"
+#include "rover_loop_fusion/ros/guarded.h"
 #include "rover_loop_fusion/ros/params.h"
 
 #include <Eigen/Geometry>
 #include <boost/make_shared.hpp>
 #include <nav_msgs/Path.h>
+#include <ros/master.h>
+#include <ros/names.h>
 
+#include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <iterator>
 #include <sstream>
 #include <vector>
@@ -16,37 +21,7 @@ namespace rover_loop_fusion {
 
 namespace {
 
-/// Yaw [rad] of a rotation (Z-Y-X, as loop_fusion's R2ypr); NaN for an unusable quaternion.
-double yawOf(const Eigen::Quaterniond& q) {
-  const double n = q.norm();
-  if (!std::isfinite(n) || n < 1e-9) return std::nan("");
-  const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
-  return std::atan2(R(1, 0), R(0, 0));
-}
-
-std::string stampText(const ros::Time& t) {
-  char buf[48];
-  std::snprintf(buf, sizeof(buf), "%u.%09u", t.sec, t.nsec);
-  return buf;
-}
-
-std::string stampText(int64_t ns) { return stampText(ros::Time().fromNSec(ns)); }
-
-ros::Time timeFromNs(int64_t ns) { return ns > 0 ? ros::Time().fromNSec(ns) : ros::Time(); }
-
-geometry_msgs::PoseStamped poseStamped(const core::Pose& p, const ros::Time& stamp, const std::string& frame) {
-  geometry_msgs::PoseStamped s;
-  s.header.stamp = stamp;
-  s.header.frame_id = frame;
-  s.pose.position.x = p.t.x();
-  s.pose.position.y = p.t.y();
-  s.pose.position.z = p.t.z();
-  s.pose.orientation.w = p.q.w();
-  s.pose.orientation.x = p.q.x();
-  s.pose.orientation.y = p.q.y();
-  s.pose.orientation.z = p.q.z();
-  return s;
-}
+const size_t kRefusedKept = 10000;  // refused keyframe messages remembered to explain verdicts
 
 /// Nearest entry of `m` (keyed by stamp [ns]) within `tol` of `ns`; end() if none.
 template <typename Map>
@@ -61,9 +36,12 @@ typename Map::const_iterator nearest(const Map& m, int64_t ns, int64_t tol) {
   return best;
 }
 
+int64_t toNs(const ros::Time& t) { return static_cast<int64_t>(t.toNSec()); }
+
 }  // namespace
 
-VerifierNode::VerifierNode(const ros::NodeHandle& nh, const ros::NodeHandle& pnh) : nh_(nh), pnh_(pnh) {}
+VerifierNode::VerifierNode(const ros::NodeHandle& nh, const ros::NodeHandle& pnh)
+    : nh_(nh), pnh_(pnh), host_(pnh, "frame_id") {}
 
 /// Runs one drainSome() on the main thread's callback queue.
 class VerifierNode::DrainCallback : public ros::CallbackInterface {
@@ -88,61 +66,49 @@ VerifierNode::~VerifierNode() {
 }
 
 bool VerifierNode::start(std::string* error) {
-  std::vector<std::string> errors;
-  ParamReader r(pnh_, &errors);
   VerifierNodeParams& p = params_;
-  r.text("verifier_type", &p.verifier_type);
-  r.text("verifier_name", &p.verifier_name);
-  r.text("keyframe_topic", &p.keyframe_topic);
-  r.text("candidate_topic", &p.candidate_topic);
-  r.integer("sequence", &p.sequence);
+  HostParamReader& r = host_.reader();
+  r.text("keyframe_topic", &p.keyframe_topic, false);
+  r.text("candidate_topic", &p.candidate_topic, false);
+  r.integer("sequence", &p.sequence, 1, 1000000);
   r.boolean("use_imu", &p.use_imu);
-  r.number("candidate_timeout", &p.candidate_timeout);
-  r.number("stamp_tolerance", &p.stamp_tolerance);
-  r.number("optimize_period", &p.optimize_period);
-  r.integer("optimize_iterations", &p.optimize_iterations);
-  r.text("frame_id", &p.frame_id);
-  r.boolean("publish_markers", &p.publish_markers);
-  r.text("verdict_log", &p.verdict_log);
-  r.integer("queue_size", &p.queue_size);
-  if (!validVerifierName(p.verifier_name))
-    r.error("verifier_name", "must be a plain name such as rover (got '" + p.verifier_name + "')");
-  if (p.keyframe_topic.empty()) r.error("keyframe_topic", "must not be empty");
-  if (p.candidate_topic.empty()) r.error("candidate_topic", "must not be empty");
-  if (p.sequence < 0) r.error("sequence", "must be >= 0");
-  if (!(p.candidate_timeout >= 0.0)) r.error("candidate_timeout", "must be >= 0 [s]");
-  if (!(p.stamp_tolerance >= 0.0 && p.stamp_tolerance < 1.0)) r.error("stamp_tolerance", "must be in [0, 1) [s]");
-  if (!std::isfinite(p.optimize_period)) r.error("optimize_period", "must be a number [s]");
-  if (p.optimize_iterations < 1) r.error("optimize_iterations", "must be >= 1");
-  if (p.frame_id.empty()) r.error("frame_id", "must not be empty");
-  if (p.queue_size < 1) r.error("queue_size", "must be >= 1");
-  if (!errors.empty()) {
-    *error = errors[0];
-    for (size_t i = 1; i < errors.size(); ++i) *error += "; " + errors[i];
+  r.number("candidate_timeout", &p.candidate_timeout, 0.0, 86400.0, "s");
+  r.number("stamp_tolerance", &p.stamp_tolerance, 0.0, 0.5, "s");
+  r.number("optimize_period", &p.optimize_period, 0.0, 86400.0, "s");
+  if (p.optimize_period > 0.0 && p.optimize_period < 0.1) {
+    std::ostringstream got;
+    got << p.optimize_period;
+    r.error("optimize_period", "must be 0 (on ~optimize only) or at least 0.1 s (got " + got.str() + ")");
+  }
+  r.integer("optimize_iterations", &p.optimize_iterations, 1, 1000);
+  r.integer("queue_size", &p.queue_size, 1, 10000000);
+  const std::pair<const char*, const std::string*> topics[] = {{"keyframe_topic", &p.keyframe_topic},
+                                                               {"candidate_topic", &p.candidate_topic}};
+  for (const auto& topic : topics) {
+    std::string why;
+    if (!topic.second->empty() && !ros::names::validate(*topic.second, why))
+      r.error(topic.first, "is not a valid topic name: " + why);
+  }
+  HostInfo info;
+  info.uses_imu = p.use_imu;
+  info.shifts_sequences = false;  // raw VIO poses: the verifier anchors sequences itself
+  VerifierHost::Start s = host_.start(info, p.queue_size);
+  if (!s.errors.empty() || !s.verifier_error.empty()) {
+    std::vector<std::string> all = s.errors;
+    if (!s.verifier_error.empty()) all.push_back(s.verifier_error);
+    *error = all[0];
+    for (size_t i = 1; i < all.size(); ++i) *error += "; " + all[i];
     return false;
   }
-
-  VerdictOutput::Options o;
-  o.frame_id = p.frame_id;
-  o.markers = p.publish_markers;
-  o.csv_path = p.verdict_log;
-  std::string output_error;
-  if (!output_.initialize(pnh_, o, &output_error)) {
-    *error = "parameter " + pnh_.resolveName("verdict_log") + ": " + output_error;
-    return false;
-  }
-
-  verifier_type_ = resolveVerifierType(p.verifier_type);
-  verifier_ = loadVerifierPlugin(p.verifier_type, pnh_.resolveName("verifier_type"), error);
-  if (!verifier_) return false;
-  HostInfo host;
-  host.uses_imu = p.use_imu;
-  host.shifts_sequences = false;  // raw VIO poses: the verifier anchors sequences itself
-  if (!initializeVerifier(*verifier_, verifier_type_, p.verifier_name, pnh_, host, error)) return false;
 
   core::VerifierConfig g;  // loop_fusion's graph: its fixed odometry neighbours and Huber loss
   g.mode = p.use_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
   g.anchor_incoming_keyframes = true;
+  // loop_fusion refuses no keyframe jump: its stand-in refuses only what cannot be a pose (the
+  // widest limits of the parameter table); the plugin applies its own limits to every keyframe.
+  g.max_keyframe_jump = core::findParameter("max_keyframe_jump")->max;
+  g.max_stamp_jump = core::findParameter("max_stamp_jump")->max;
+  g.jump_confirmations = static_cast<int>(core::findParameter("jump_confirmations")->min);
   graph_.reset(new core::PoseGraph(g));
 
   odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
@@ -163,27 +129,60 @@ bool VerifierNode::start(std::string* error) {
   pending_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &VerifierNode::onPendingTimer, this);
   if (p.optimize_period > 0)
     optimize_timer_ = nh_.createWallTimer(ros::WallDuration(p.optimize_period), &VerifierNode::onOptimizeTimer, this);
-  ROS_INFO("[rover] %s: verifying loop candidates from %s (keyframes: %s) with %s (parameters in %s)%s%s",
+  if (!ros::param::get("/run_id", run_id_)) run_id_.clear();
+  watchdog_timer_ = nh_.createWallTimer(ros::WallDuration(1.0), &VerifierNode::onWatchdog, this);
+  ROS_INFO("[rover] %s: candidates from %s, keyframes from %s (sequence %d, %s); candidate_timeout %.3g s, "
+           "stamp_tolerance %.3g s, optimize_period %.3g s, queue_size %d",
            ros::this_node::getName().c_str(), candidate_sub_.getTopic().c_str(), keyframe_sub_.getTopic().c_str(),
-           verifier_type_.c_str(), pnh_.resolveName(p.verifier_name).c_str(),
-           p.verdict_log.empty() ? "" : ", verdict log ", p.verdict_log.c_str());
+           p.sequence, p.use_imu ? "4-DoF" : "6-DoF", p.candidate_timeout, p.stamp_tolerance, p.optimize_period,
+           p.queue_size);
   return true;
 }
 
+int VerifierNode::spin(const std::atomic<bool>& stop) {
+  stop_ = &stop;
+  ros::CallbackQueue* queue = ros::getGlobalCallbackQueue();
+  while (ros::ok() && !stop && exit_code_ == 0) queue->callAvailable(ros::WallDuration(0.1));
+  if (exit_code_ == 0) finish();
+  return exit_code_;
+}
+
 void VerifierNode::finish() {
-  if (receiver_) receiver_->stop();
-  drainInbox();
-  if (inbox_dropped_ > 0)
-    ROS_ERROR("[rover] %zu messages were dropped because the inbox was full (queue_size=%d)", inbox_dropped_,
-              params_.queue_size);
-  try {
-    while (!pending_.empty()) {
-      const Pending c = pending_.front();
-      pending_.pop_front();
-      reject(c.msg, -1, -1, "the node stopped before the candidate's keyframes arrived");
+  guarded("shutting down", [&] {
+    if (receiver_) receiver_->stop();
+    keyframe_sub_.shutdown();
+    candidate_sub_.shutdown();
+    std::deque<Incoming> inbox;
+    {
+      std::lock_guard<std::mutex> lock(inbox_mutex_);
+      receiving_ = false;
+      inbox.swap(inbox_);
     }
-  } catch (...) {
-  }
+    const size_t waiting = waiting_.size();
+    size_t unprocessed_keyframes = 0, unprocessed_candidates = 0;
+    for (uint64_t id : waiting_.ids())
+      reject(waiting_.take(id), -1, -1, "not verified: the node was shut down while the candidate waited for its "
+             "keyframes", false);
+    for (const Incoming& item : inbox) {
+      if (item.keyframe) {
+        ++unprocessed_keyframes;
+        continue;
+      }
+      ++unprocessed_candidates;
+      reject(*item.candidate, -1, -1, "not verified: the node was shut down before it got to the candidate", false);
+    }
+    refused_warning_.flush();
+    if (inbox_dropped_ > 0)
+      ROS_ERROR("[rover] %zu messages were dropped because the inbox was full (queue_size=%d)", inbox_dropped_,
+                params_.queue_size);
+    ROS_INFO("[rover] %s shutting down: %zu verdicts published; %zu candidates not verified (%zu waiting for "
+             "keyframes, %zu not processed) got an invalid_input verdict saying so; %zu keyframe messages not "
+             "processed",
+             ros::this_node::getName().c_str(), host_.output().published(), waiting + unprocessed_candidates,
+             waiting, unprocessed_candidates, unprocessed_keyframes);
+    // roscpp sends on its own threads and has no flush: give the last verdicts time to leave.
+    if (waiting + unprocessed_candidates > 0) ros::WallDuration(0.5).sleep();
+  });
 }
 
 // ---- input -----------------------------------------------------------------------------------
@@ -192,6 +191,7 @@ void VerifierNode::receive(Incoming item) {
   bool schedule = false;
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
+    if (!receiving_) return;
     if (inbox_.size() >= static_cast<size_t>(params_.queue_size)) {
       ++inbox_dropped_;
       ROS_ERROR_THROTTLE(1.0, "[rover] %s message dropped: %zu messages are waiting to be processed "
@@ -215,14 +215,17 @@ void VerifierNode::receive(Incoming item) {
 }
 
 void VerifierNode::drainSome(size_t max_items) {
+  expire();
   for (size_t n = 0;; ++n) {
     Incoming item;
     {
       std::lock_guard<std::mutex> lock(inbox_mutex_);
-      if (inbox_.empty()) {
+      if (inbox_.empty() || !receiving_) {
         drain_scheduled_ = false;
         return;
       }
+      // Stopping: leave the rest to finish(), which says what was not processed.
+      if ((stop_ && *stop_) || exit_code_ != 0) return;
       if (n == max_items) break;  // still scheduled: comes back after the other callbacks
       item = std::move(inbox_.front());
       inbox_.pop_front();
@@ -237,83 +240,85 @@ void VerifierNode::drainSome(size_t max_items) {
 void VerifierNode::drainInbox() { drainSome(static_cast<size_t>(-1)); }
 
 void VerifierNode::onKeyframe(const nav_msgs::Odometry::ConstPtr& msg) {
-  try {
-    addKeyframe(*msg);
-    processPending(false);
-  } catch (const std::exception& e) {
-    ROS_ERROR("[rover] keyframe message: %s", e.what());
-  } catch (...) {
-    ROS_ERROR("[rover] keyframe message: unknown exception");
-  }
+  guarded("keyframe message", [&] {
+    const int64_t index = next_index_++;
+    addKeyframe(*msg, index);
+    wake(toNs(msg->header.stamp), index);
+  });
 }
 
 void VerifierNode::onCandidate(const LoopCandidate::ConstPtr& msg) {
-  try {
-    pending_.push_back(Pending{*msg, ros::WallTime::now()});
-    processPending(false);
-  } catch (const std::exception& e) {
-    ROS_ERROR("[rover] loop candidate message: %s", e.what());
-  } catch (...) {
-    ROS_ERROR("[rover] loop candidate message: unknown exception");
-  }
+  guarded("loop candidate message", [&] {
+    std::vector<WaitKey> waits;
+    if (!tryDecide(*msg, &waits)) waiting_.add(*msg, ros::WallTime::now().toSec(), waits);
+  });
 }
 
 void VerifierNode::onPendingTimer(const ros::WallTimerEvent&) {
-  if (pending_.empty()) return;
-  try {
-    processPending(true);
-  } catch (...) {
-    ROS_ERROR("[rover] deciding waiting candidates: unknown exception");
-  }
+  guarded("deciding waiting candidates", [&] { expire(); });
 }
 
-void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg) {
-  const int64_t index = next_index_++;
-  const int64_t ns = static_cast<int64_t>(msg.header.stamp.toNSec());
+void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg, int64_t index) {
+  const int64_t ns = toNs(msg.header.stamp);
   const geometry_msgs::Point& pos = msg.pose.pose.position;
   const geometry_msgs::Quaternion& ori = msg.pose.pose.orientation;
   const Eigen::Vector3d t(pos.x, pos.y, pos.z);
   const Eigen::Quaterniond q(ori.w, ori.x, ori.y, ori.z);
-  std::string why;
   if (have_keyframe_ && ns <= newest_stamp_ns_) {
     auto same = by_stamp_.find(ns);
-    why = same != by_stamp_.end()
-              ? "duplicate: keyframe " + std::to_string(same->second) + " has the same stamp"
-              : "out of order: stamp " + stampText(ns) + " is not after the newest keyframe's " +
-                    stampText(newest_stamp_ns_);
-  } else {
-    const core::Status s = graph_->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q);
-    if (!s.ok) why = s.message;
+    if (same != by_stamp_.end()) {
+      refuseKeyframe(index, ns, "duplicate: keyframe " + std::to_string(same->second) + " has the same stamp");
+      return;
+    }
+    // Older than the newest keyframe: the graph refuses it unless it confirms a new clock
+    // (core: max_stamp_jump / jump_confirmations), so the ordering rule lives in one place.
   }
-  if (!why.empty()) {
-    ++keyframes_refused_;
-    refused_by_index_[index] = why;
-    if (!by_stamp_.count(ns)) refused_by_stamp_[ns] = why;
-    ROS_WARN("[rover] keyframe message %ld (stamp %s) refused: %s; loop candidates that name it get "
-             "invalid_input", static_cast<long>(index), stampText(ns).c_str(), why.c_str());
+  const core::Status s = graph_->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q);
+  if (!s.ok) {
+    refuseKeyframe(index, ns, s.message);
     return;
   }
+  if (s.warning()) ROS_WARN("[rover] keyframe message %ld: %s", static_cast<long>(index), s.message.c_str());
   by_stamp_[ns] = index;
   stamp_of_[index] = ns;
   newest_stamp_ns_ = ns;
   have_keyframe_ = true;
   changed_ = true;
-  core::Status s;
-  try {
-    s = verifier_->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q);
-  } catch (const std::exception& e) {
-    s = core::Status::Error(std::string("the verifier threw: ") + e.what());
-  } catch (...) {
-    s = core::Status::Error("the verifier threw an exception");
+  core::Status added;
+  std::string threw;
+  if (!guarded("verifier " + host_.verifierType() + ": addKeyframe " + std::to_string(index),
+               [&] { added = host_.verifier()->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q); },
+               &threw))
+    added = core::Status::Error("the verifier threw: " + threw);
+  if (added.warning())
+    ROS_WARN("[rover] verifier, keyframe %ld: %s", static_cast<long>(index), added.message.c_str());
+  if (!added.ok)
+    refused_warning_.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + added.message +
+                          "); loops that involve it are rejected");
+}
+
+void VerifierNode::refuseKeyframe(int64_t index, int64_t ns, const std::string& why) {
+  ++keyframes_refused_;
+  refused_by_index_[index] = why;
+  if (!by_stamp_.count(ns)) refused_by_stamp_[ns] = why;
+  refused_order_.emplace_back(index, ns);
+  if (refused_order_.size() > kRefusedKept) {
+    const std::pair<int64_t, int64_t> old = refused_order_.front();
+    refused_order_.pop_front();
+    refused_by_index_.erase(old.first);
+    refused_by_stamp_.erase(old.second);
   }
-  if (!s.ok)
-    ROS_WARN("[rover] keyframe %ld not added to the verifier (%s); loops that involve it are rejected",
-             static_cast<long>(index), s.message.c_str());
+  refused_warning_.warn("keyframe message " + std::to_string(index) + " (stamp " + stampText(rosTimeFromNs(ns)) +
+                        ") refused: " + why + "; loop candidates that name it get invalid_input");
 }
 
 VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& stamp, const char* role,
                                                int64_t* found, std::string* why) const {
   const std::string who = std::string(role) + " keyframe ";
+  if (index < -1) {
+    *why = who + "index " + std::to_string(index) + " is negative (-1 names a keyframe by its stamp)";
+    return Resolution::kInvalid;
+  }
   if (index >= 0) {
     if (stamp_of_.count(index)) {
       *found = index;
@@ -324,10 +329,14 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
       *why = who + std::to_string(index) + " was refused (" + refused->second + ")";
       return Resolution::kInvalid;
     }
+    if (index < next_index_) {
+      *why = who + std::to_string(index) + " was refused";
+      return Resolution::kInvalid;
+    }
     *why = who + std::to_string(index) + " has not arrived";
-    return index >= next_index_ ? Resolution::kWait : Resolution::kInvalid;
+    return Resolution::kWait;
   }
-  const int64_t ns = static_cast<int64_t>(stamp.toNSec());
+  const int64_t ns = toNs(stamp);
   const int64_t tol = static_cast<int64_t>(std::llround(params_.stamp_tolerance * 1e9));
   auto hit = nearest(by_stamp_, ns, tol);
   if (hit != by_stamp_.end()) {
@@ -348,52 +357,65 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
   return Resolution::kInvalid;
 }
 
-void VerifierNode::processPending(bool check_timeout) {
-  const ros::WallTime now = ros::WallTime::now();
-  for (auto it = pending_.begin(); it != pending_.end();) {
-    const LoopCandidate& msg = it->msg;
+// ---- waiting candidates ----------------------------------------------------------------------
+
+VerifierNode::WaitKey VerifierNode::waitKey(int64_t index, const ros::Time& stamp) const {
+  if (index >= 0) return WaitKey{false, index};
+  return WaitKey{true, toNs(stamp) - static_cast<int64_t>(std::llround(params_.stamp_tolerance * 1e9))};
+}
+
+bool VerifierNode::tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits) {
+  int64_t q = -1, m = -1;
+  std::string why_q, why_m;
+  const Resolution rq = resolve(msg.query_index, msg.query_stamp, "query", &q, &why_q);
+  const Resolution rm = resolve(msg.match_index, msg.match_stamp, "match", &m, &why_m);
+  if (rq == Resolution::kInvalid || rm == Resolution::kInvalid) {
+    reject(msg, q, m, rq == Resolution::kInvalid ? why_q : why_m);
+  } else if (rq == Resolution::kFound && rm == Resolution::kFound) {
+    verify(msg, q, m);
+  } else if (rq == Resolution::kFound) {
+    // Keyframes arrive in order: a match that has not arrived is newer than the query.
+    reject(msg, q, m, why_m + " although the query keyframe has: the match must be the older keyframe");
+  } else {
+    waits->push_back(waitKey(msg.query_index, msg.query_stamp));
+    if (rm == Resolution::kWait) waits->push_back(waitKey(msg.match_index, msg.match_stamp));
+    return false;
+  }
+  return true;
+}
+
+void VerifierNode::wake(int64_t ns, int64_t index) {
+  if (waiting_.empty()) return;
+  for (uint64_t id : waiting_.wake(ns, index)) {  // in arrival order
+    std::vector<WaitKey> waits;
+    if (tryDecide(waiting_.get(id), &waits)) waiting_.take(id);
+    else waiting_.rewait(id, waits);
+  }
+}
+
+void VerifierNode::expire() {
+  const double deadline = ros::WallTime::now().toSec() - params_.candidate_timeout;
+  uint64_t id;
+  while (waiting_.oldestBefore(deadline, &id)) {  // arrival order is waiting order
+    const LoopCandidate msg = waiting_.take(id);
     int64_t q = -1, m = -1;
-    std::string why_q, why_m;
-    const Resolution rq = resolve(msg.query_index, msg.query_stamp, "query", &q, &why_q);
-    const Resolution rm = resolve(msg.match_index, msg.match_stamp, "match", &m, &why_m);
-    // Copy: verify() and reject() publish, and the element is erased below.
-    const LoopCandidate c = msg;
-    if (rq == Resolution::kInvalid || rm == Resolution::kInvalid) {
-      it = pending_.erase(it);
-      reject(c, q, m, rq == Resolution::kInvalid ? why_q : why_m);
-    } else if (rq == Resolution::kFound && rm == Resolution::kFound) {
-      it = pending_.erase(it);
-      verify(c, q, m);
-    } else if (rq == Resolution::kFound) {
-      // Keyframes arrive in order: a match that has not arrived is newer than the query.
-      it = pending_.erase(it);
-      reject(c, q, m, why_m + " although the query keyframe has: the match must be the older keyframe");
-    } else if (check_timeout && (now - it->received).toSec() > params_.candidate_timeout) {
-      std::ostringstream s;
-      s << why_q << " within candidate_timeout=" << params_.candidate_timeout << " s";
-      it = pending_.erase(it);
-      reject(c, q, m, s.str());
-    } else {
-      ++it;
-    }
+    std::string why;
+    resolve(msg.query_index, msg.query_stamp, "query", &q, &why);
+    std::string ignored;
+    resolve(msg.match_index, msg.match_stamp, "match", &m, &ignored);
+    std::ostringstream s;
+    s << why << " within candidate_timeout=" << params_.candidate_timeout << " s";
+    reject(msg, q, m, s.str());
   }
 }
 
 // ---- verdicts --------------------------------------------------------------------------------
 
 void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match) {
-  core::LoopCandidate c;
-  c.query_index = query;
-  c.match_index = match;
-  const geometry_msgs::Pose& p = msg.relative_pose;
-  c.relative_t = Eigen::Vector3d(p.position.x, p.position.y, p.position.z);
-  c.relative_q = Eigen::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
-  c.relative_yaw = std::isnan(msg.relative_yaw) ? yawOf(c.relative_q) : msg.relative_yaw;
-  c.inliers = msg.inliers;
-  core::Verdict v = verifyAndCommit(*verifier_, verifier_type_, c);
+  core::Verdict v = host_.decide(fromCandidateMsg(msg, query, match));
   if (v.accepted) {
     // The core's API reports refusals as a Status; it does not throw.
-    const core::Status g = graph_->addLoop(c);
+    const core::Status g = graph_->addLoop(fromCandidateMsg(msg, query, match));
     if (g.ok) {
       changed_ = true;
     } else {
@@ -407,99 +429,108 @@ void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match
   publishVerdict(v, msg);
 }
 
-void VerifierNode::reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why) {
-  core::Verdict v;
-  v.query_index = query;
-  v.match_index = match;
-  v.accepted = false;
-  v.reason = core::Reason::kInvalidInput;
-  v.detail = why;
-  publishVerdict(v, msg);
+void VerifierNode::reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why, bool log) {
+  core::LoopCandidate c;
+  c.query_index = query;
+  c.match_index = match;
+  publishVerdict(rejection(c, why), msg, log);
 }
 
-void VerifierNode::publishVerdict(const core::Verdict& v, const LoopCandidate& msg) {
+void VerifierNode::publishVerdict(const core::Verdict& v, const LoopCandidate& msg, bool log) {
   VerdictContext ctx;
   ctx.inliers = msg.inliers;
-  ctx.verifier = verifier_type_;
+  ctx.verifier = host_.verifierType();
   auto q = stamp_of_.find(v.query_index), m = stamp_of_.find(v.match_index);
-  ctx.query_stamp = q != stamp_of_.end() ? timeFromNs(q->second).toSec() : msg.query_stamp.toSec();
-  ctx.match_stamp = m != stamp_of_.end() ? timeFromNs(m->second).toSec() : msg.match_stamp.toSec();
-  const std::string what = "loop " + std::to_string(v.query_index) + " -> " + std::to_string(v.match_index) +
-                           " (stamps " + stampText(ros::Time(ctx.query_stamp)) + " -> " +
-                           stampText(ros::Time(ctx.match_stamp)) + ")";
-  if (v.accepted) ROS_INFO("[rover] %s accepted: %s", what.c_str(), v.detail.c_str());
-  else if (v.reason == core::Reason::kInvalidInput)
-    ROS_WARN("[rover] %s REJECTED (invalid_input): %s", what.c_str(), v.detail.c_str());
-  else ROS_INFO("[rover] %s REJECTED (%s): %s", what.c_str(), core::toString(v.reason), v.detail.c_str());
-  try {
-    if (params_.publish_markers && q != stamp_of_.end() && m != stamp_of_.end()) {
-      // At the verifier's estimate (an accepted loop's ends meet), else at the VIO positions.
-      std::vector<core::TrajectoryPoint> trajectory = verifier_->trajectory();
-      if (trajectory.empty()) trajectory = graph_->trajectory();
-      ctx.have_positions = findTrajectoryPosition(trajectory, v.query_index, &ctx.query_position) &&
-                           findTrajectoryPosition(trajectory, v.match_index, &ctx.match_position);
-    }
-  } catch (...) {
-    ctx.have_positions = false;
-  }
-  try {
-    output_.publish(v, ctx);
-  } catch (const std::exception& e) {
-    ROS_ERROR("[rover] publishing the verdict on %s failed: %s", what.c_str(), e.what());
-  }
+  ctx.query_stamp = q != stamp_of_.end() ? rosTimeFromNs(q->second).toSec() : msg.query_stamp.toSec();
+  ctx.match_stamp = m != stamp_of_.end() ? rosTimeFromNs(m->second).toSec() : msg.match_stamp.toSec();
+  const std::string what = log ? "loop " + std::to_string(v.query_index) + " -> " + std::to_string(v.match_index) +
+                                     " (stamps " + stampText(ctx.query_stamp) + " -> " + stampText(ctx.match_stamp) + ")"
+                               : std::string();
+  host_.publish(v, ctx, what, [&](int64_t index, Eigen::Vector3d* position) {
+    // The keyframes' positions in the node's own graph (the accept-all plugin keeps none).
+    core::Pose pose;
+    if (!graph_->estimate(index, &pose)) return false;
+    *position = pose.t;
+    return true;
+  });
 }
 
 // ---- loop_fusion's optimisation and the paths ------------------------------------------------
 
 void VerifierNode::onOptimizeTimer(const ros::WallTimerEvent&) {
   if (!changed_) return;
-  try {
+  guarded("optimisation", [&] {
     Optimize::Response r;
     optimizeAndPublish(&r);
-  } catch (const std::exception& e) {
-    ROS_ERROR("[rover] optimisation: %s", e.what());
-  } catch (...) {
-    ROS_ERROR("[rover] optimisation: unknown exception");
-  }
+  });
 }
 
 bool VerifierNode::onOptimize(Optimize::Request&, Optimize::Response& res) {
-  try {
-    optimizeAndPublish(&res);
-  } catch (const std::exception& e) {
+  std::string why;
+  if (!guarded("~optimize", [&] { optimizeAndPublish(&res); }, &why)) {
     res.success = false;
-    res.message = e.what();
-  } catch (...) {
-    res.success = false;
-    res.message = "unknown exception";
+    res.message = why;
   }
   return true;
+}
+
+void VerifierNode::onWatchdog(const ros::WallTimerEvent&) {
+  guarded("master watchdog", [&] {
+    if (!ros::master::check()) {
+      if (!master_lost_)
+        ROS_WARN("[rover] the ROS master at %s is unreachable; if it restarts, this node exits (status 2) to be "
+                 "respawned",
+                 ros::master::getURI().c_str());
+      master_lost_ = true;
+      return;
+    }
+    std::string run_id;
+    XmlRpc::XmlRpcValue args, result, payload;
+    args[0] = ros::this_node::getName();
+    args[1] = "/run_id";
+    if (ros::master::execute("getParam", args, result, payload, false) &&
+        payload.getType() == XmlRpc::XmlRpcValue::TypeString)
+      run_id = static_cast<std::string>(payload);
+    // A new /run_id is a new master; without one to compare, coming back after being
+    // unreachable counts as a restart.
+    const bool restarted =
+        !run_id_.empty() && !run_id.empty() ? run_id != run_id_ : run_id_.empty() && master_lost_;
+    if (!restarted) {
+      if (master_lost_) ROS_INFO("[rover] the ROS master is reachable again");
+      master_lost_ = false;
+      return;
+    }
+    ROS_FATAL("[rover] the ROS master restarted (run_id %s -> %s): this node's topics and services were registered "
+              "with the old one and nobody can reach them. Exiting with status 2 (verifier.launch respawns the node).",
+              run_id_.c_str(), run_id.c_str());
+    exit_code_ = 2;
+  });
 }
 
 void VerifierNode::optimizeAndPublish(Optimize::Response* out) {
   changed_ = false;
   const std::vector<core::TrajectoryPoint> trajectory = graph_->trajectory();
   const core::BatchSolveResult solved = graph_->solveLikeLoopFusion(params_.optimize_iterations);
-  const ros::Time newest = have_keyframe_ ? timeFromNs(newest_stamp_ns_) : ros::Time();
+  const ros::Time newest = have_keyframe_ ? rosTimeFromNs(newest_stamp_ns_) : ros::Time();
+  const std::string& frame = host_.params().frame_id;
   nav_msgs::Path& odometry = out->odometry;
   nav_msgs::Path& pose_graph = out->pose_graph;
   nav_msgs::Path& estimate = out->estimate;
   odometry.header.stamp = pose_graph.header.stamp = estimate.header.stamp = newest;
-  odometry.header.frame_id = pose_graph.header.frame_id = estimate.header.frame_id = params_.frame_id;
+  odometry.header.frame_id = pose_graph.header.frame_id = estimate.header.frame_id = frame;
+  auto stampOf = [&](const core::TrajectoryPoint& t) {
+    auto ns = stamp_of_.find(t.index);
+    return ns != stamp_of_.end() ? rosTimeFromNs(ns->second) : toRosTime(t.stamp);
+  };
   for (size_t i = 0; i < trajectory.size(); ++i) {
-    auto ns = stamp_of_.find(trajectory[i].index);
-    const ros::Time stamp = ns != stamp_of_.end() ? timeFromNs(ns->second) : ros::Time(trajectory[i].stamp);
-    odometry.poses.push_back(poseStamped(trajectory[i].vio, stamp, params_.frame_id));
+    const ros::Time stamp = stampOf(trajectory[i]);
+    odometry.poses.push_back(toPoseStamped(trajectory[i].vio, stamp, frame));
     // A failed solve (reported) leaves the VIO poses.
     const core::Pose& p = solved.ok && i < solved.poses.size() ? solved.poses[i] : trajectory[i].vio;
-    pose_graph.poses.push_back(poseStamped(p, stamp, params_.frame_id));
+    pose_graph.poses.push_back(toPoseStamped(p, stamp, frame));
   }
-  const std::vector<core::TrajectoryPoint> own = verifier_->trajectory();
-  for (const core::TrajectoryPoint& t : own) {
-    auto ns = stamp_of_.find(t.index);
-    estimate.poses.push_back(
-        poseStamped(t.estimate, ns != stamp_of_.end() ? timeFromNs(ns->second) : ros::Time(t.stamp), params_.frame_id));
-  }
+  for (const core::TrajectoryPoint& t : host_.verifier()->trajectory())
+    estimate.poses.push_back(toPoseStamped(t.estimate, stampOf(t), frame));
   odometry_path_pub_.publish(odometry);
   pose_graph_path_pub_.publish(pose_graph);
   estimate_path_pub_.publish(estimate);
@@ -507,13 +538,13 @@ void VerifierNode::optimizeAndPublish(Optimize::Response* out) {
   out->success = solved.ok;
   out->keyframe_messages = static_cast<uint32_t>(next_index_);
   out->keyframes = static_cast<uint32_t>(trajectory.size());
-  out->candidates_waiting = static_cast<uint32_t>(pending_.size());
-  out->verdicts = static_cast<uint32_t>(output_.published());
+  out->candidates_waiting = static_cast<uint32_t>(waiting_.size());
+  out->verdicts = static_cast<uint32_t>(host_.output().published());
   out->loops = static_cast<uint32_t>(graph_->loopCount());
   std::ostringstream s;
   s.precision(3);
   s << trajectory.size() << " keyframes (" << keyframes_refused_ << " refused), " << graph_->loopCount()
-    << " loops accepted, " << output_.published() << " verdicts; loop_fusion optimisation: "
+    << " loops accepted, " << host_.output().published() << " verdicts; loop_fusion optimisation: "
     << (solved.ok ? "" : "FAILED ") << solved.free_keyframes << " keyframes free, " << solved.iterations
     << " iterations, " << std::fixed << solved.solve_ms << " ms";
   out->message = s.str();

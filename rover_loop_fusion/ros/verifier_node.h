@@ -5,7 +5,7 @@
 // them: raw per-session VIO poses) and loop candidates (rover_loop_fusion/LoopCandidate, as the
 // patched loop_fusion publishes them on /loop_fusion/loop_candidates). Keyframes are numbered
 // in arrival order (0, 1, ...); candidates name their keyframes by stamp (index -1) or by that
-// number.
+// number. Any other negative index is invalid.
 //
 // Output (private topics): ~loop_verdicts, ~loop_markers (and the optional CSV log) as the
 // patched loop_fusion publishes them; ~pose_graph_path, what loop_fusion's optimisation makes
@@ -16,52 +16,61 @@
 // service (rover_loop_fusion/Optimize), which also returns them.
 //
 // Robustness: a candidate that arrives before its keyframes waits up to ~candidate_timeout
-// seconds; then, or when it names keyframes that never came or were refused, it gets an
+// seconds (indexed by the keyframe it waits for: each message costs O(log n) however many
+// wait); then, or when it names keyframes that never came or were refused, it gets an
 // invalid_input verdict with a ROS_WARN. Malformed keyframes (NaN, non-unit quaternion,
-// duplicate or out-of-order stamps) are refused with a ROS_WARN. Nothing a message contains
-// stops the node.
+// duplicate or out-of-order stamps) are refused with a ROS_WARN (the first 20 one by one,
+// then a summary every 10 s); the last 10000 refusals are remembered to explain verdicts.
+// Nothing a message contains stops the node.
 //
 // Threading: the subscriptions have their own callback queue and thread, which only append
-// each message to an inbox (at most ~queue_size messages). The node's main thread (ros::spin)
-// takes them from the inbox in arrival order and does the work. A verification that takes
-// longer than the input rate (a bag played at 200x) therefore never makes roscpp drop
-// keyframe messages; if the inbox is full, the message is dropped with a ROS_ERROR.
+// each message to an inbox (at most ~queue_size messages). The node's main thread takes them
+// from the inbox in arrival order and does the work. A verification that takes longer than
+// the input rate (a bag played at 200x) therefore never makes roscpp drop keyframe messages;
+// if the inbox is full, the message is dropped with a ROS_ERROR (counted).
+//
+// Shutdown (SIGINT, SIGTERM): the node finishes the verification under way, stops taking
+// messages, gives every candidate it has not decided a verdict ("not verified: the node was
+// shut down"), publishes and logs them, says what it left undone, then exits.
+//
+// Master watchdog: the node checks the ROS master every second; if it restarted (new
+// /run_id), the node's registrations are gone, so it exits with status 2 and a ROS_FATAL
+// saying so; verifier.launch respawns it.
 #pragma once
 
 #include "rover_loop_fusion/LoopCandidate.h"
 #include "rover_loop_fusion/Optimize.h"
 #include "rover_loop_fusion/core/pose_graph.h"
-#include "rover_loop_fusion/ros/verdict_output.h"
-#include "rover_loop_fusion/ros/verifier_loader.h"
+#include "rover_loop_fusion/ros/verifier_host.h"
+#include "rover_loop_fusion/ros/waiting_candidates.h"
 
 #include <nav_msgs/Odometry.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 
+#include <atomic>
 #include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace rover_loop_fusion {
 
-/// The node's own parameters (private namespace); the plugin reads ~<verifier_name>/...
+/// The node's own parameters (private namespace); the shared ones are in HostParams, the
+/// plugin reads ~<verifier_name>/...
 struct VerifierNodeParams {
-  std::string verifier_type = kTrajectoryPriorVerifierType;  ///< or rover / accept_all
-  std::string verifier_name = "rover";
   std::string keyframe_topic = "/vins_estimator/keyframe_pose";
   std::string candidate_topic = "/loop_fusion/loop_candidates";
-  int sequence = 1;                ///< loop_fusion sequence of every keyframe received
+  int sequence = 1;                ///< loop_fusion sequence of every keyframe received (>= 1)
   bool use_imu = true;             ///< 4-DoF (VIO) or 6-DoF (VO) pose graph, as loop_fusion's flag
   double candidate_timeout = 2.0;  ///< [s, wall clock] a candidate waits for its keyframes
   double stamp_tolerance = 1e-3;   ///< [s] a candidate's stamp names the nearest keyframe within it
-  double optimize_period = 2.0;    ///< [s, wall clock] loop_fusion-like optimisation; <= 0: on ~optimize only
+  double optimize_period = 2.0;    ///< [s, wall clock] loop_fusion-like optimisation; 0: on ~optimize only
   int optimize_iterations = 5;     ///< loop_fusion's optimize4DoF: 5
-  std::string frame_id = "world";  ///< frame of verdicts, markers and paths
-  bool publish_markers = true;
-  std::string verdict_log;         ///< CSV file every verdict is appended to; empty: off
-  int queue_size = 100000;         ///< messages waiting to be processed (inbox and subscriber queues)
+  int queue_size = 100000;         ///< messages waiting to be processed (inbox, subscriber and verdict queues)
 };
 
 class VerifierNode {
@@ -74,21 +83,23 @@ class VerifierNode {
   /// false with *error naming the parameter when the node cannot run.
   bool start(std::string* error);
 
-  /// Gives every candidate still waiting an invalid_input verdict (call before shutdown).
+  /// Runs the main thread's callbacks until ros::ok() ends or `stop` is set (a signal
+  /// handler's flag), then finish(). Returns the process's exit status: 0, or 2 when the
+  /// master restarted.
+  int spin(const std::atomic<bool>& stop);
+
+  /// Stops taking messages and gives every candidate not decided yet (waiting, or still in
+  /// the inbox) an invalid_input verdict "not verified: the node was shut down"; logs what
+  /// was left undone. Call while ROS is still up.
   void finish();
 
-  size_t verdictCount() const { return output_.published(); }
+  size_t verdictCount() const { return host_.output().published(); }
 
-  /// Processes everything in the inbox now (the main thread does this on its own; for shutdown
-  /// and tests).
+  /// Processes everything in the inbox now (the main thread does this on its own; for tests).
   void drainInbox();
 
  private:
-  struct KeyframeRef;
-  struct Pending {
-    LoopCandidate msg;
-    ros::WallTime received;
-  };
+  typedef WaitingCandidates<LoopCandidate>::Wait WaitKey;
   enum class Resolution { kFound, kWait, kInvalid };
   /// A message as received: exactly one of the two is set.
   struct Incoming {
@@ -107,31 +118,37 @@ class VerifierNode {
   bool onOptimize(Optimize::Request& req, Optimize::Response& res);
   void onPendingTimer(const ros::WallTimerEvent&);
   void onOptimizeTimer(const ros::WallTimerEvent&);
+  void onWatchdog(const ros::WallTimerEvent&);
 
-  void addKeyframe(const nav_msgs::Odometry& msg);
-  /// Decides every waiting candidate that can be decided; with timeout, also those that
-  /// waited too long.
-  void processPending(bool check_timeout);
+  void addKeyframe(const nav_msgs::Odometry& msg, int64_t index);
+  void refuseKeyframe(int64_t index, int64_t ns, const std::string& why);
+  /// Decides what can be decided about a candidate: verifies or rejects it (true), or it has to
+  /// wait for its query keyframe (and maybe its match): false, with what it waits for.
+  bool tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits);
+  WaitKey waitKey(int64_t index, const ros::Time& stamp) const;
+  /// Re-examines the waiting candidates that a keyframe with stamp `ns` / number `index` may
+  /// have resolved, in arrival order.
+  void wake(int64_t ns, int64_t index);
+  /// Rejects the candidates that waited longer than candidate_timeout.
+  void expire();
   Resolution resolve(int64_t index, const ros::Time& stamp, const char* role, int64_t* found,
                      std::string* why) const;
   void verify(const LoopCandidate& msg, int64_t query, int64_t match);
-  void reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why);
-  void publishVerdict(const core::Verdict& v, const LoopCandidate& msg);
+  void reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why, bool log = true);
+  void publishVerdict(const core::Verdict& v, const LoopCandidate& msg, bool log = true);
   /// Runs loop_fusion's optimisation on the graph and publishes the paths (into *out too).
   void optimizeAndPublish(Optimize::Response* out);
 
   ros::NodeHandle nh_, pnh_;
+  VerifierHost host_;
   VerifierNodeParams params_;
-  std::string verifier_type_;
-  VerifierPtr verifier_;
   /// loop_fusion's pose graph: every keyframe and the loops this node accepted, whatever the
   /// plugin; solved like loop_fusion (solveLikeLoopFusion) for ~pose_graph_path.
   std::unique_ptr<core::PoseGraph> graph_;
-  VerdictOutput output_;
   ros::Subscriber keyframe_sub_, candidate_sub_;
   ros::Publisher odometry_path_pub_, pose_graph_path_pub_, estimate_path_pub_;
   ros::ServiceServer optimize_srv_;
-  ros::WallTimer pending_timer_, optimize_timer_;
+  ros::WallTimer pending_timer_, optimize_timer_, watchdog_timer_;
 
   // Receiving (see "Threading" above). The spinner is declared last among these so that it is
   // destroyed (stopped) first.
@@ -139,18 +156,29 @@ class VerifierNode {
   std::mutex inbox_mutex_;
   std::deque<Incoming> inbox_;
   bool drain_scheduled_ = false;
+  bool receiving_ = true;
   size_t inbox_peak_ = 0;
   size_t inbox_dropped_ = 0;
   std::unique_ptr<ros::AsyncSpinner> receiver_;
 
-  int64_t next_index_ = 0;              // number of the next keyframe message
+  const std::atomic<bool>* stop_ = nullptr;  // set by spin(): checked between messages
+  int exit_code_ = 0;
+  std::string run_id_;        // the master's /run_id at start
+  bool master_lost_ = false;
+
+  int64_t next_index_ = 0;               // number of the next keyframe message
   std::map<int64_t, int64_t> by_stamp_;  // stamp [ns] -> index, keyframes in the graph
   std::map<int64_t, int64_t> stamp_of_;  // index -> stamp [ns], keyframes in the graph
-  std::map<int64_t, std::string> refused_by_index_;  // keyframe messages that were refused
+  std::map<int64_t, std::string> refused_by_index_;  // the last kRefusedKept refused keyframe messages
   std::map<int64_t, std::string> refused_by_stamp_;  // (stamps no graph keyframe has)
+  std::deque<std::pair<int64_t, int64_t>> refused_order_;  // (index, stamp) oldest first
+  RepeatedWarning refused_warning_;
   bool have_keyframe_ = false;
   int64_t newest_stamp_ns_ = 0;  // newest stamp of a keyframe in the graph
-  std::deque<Pending> pending_;
+
+  // Candidates waiting for their keyframes (received: when the node took them from the inbox).
+  WaitingCandidates<LoopCandidate> waiting_;
+
   bool changed_ = false;  // keyframes or loops since the last optimisation
   size_t keyframes_refused_ = 0;
 };

@@ -1,6 +1,7 @@
 #include "rover_loop_fusion/sim/scenario_io.h"
 
 #include <cerrno>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -31,7 +32,8 @@ bool toDouble(const std::string& s, double* v) {
   char* end = nullptr;
   errno = 0;
   *v = std::strtod(s.c_str(), &end);
-  return end == s.c_str() + s.size() && errno != ERANGE;
+  // ERANGE is overflow (+-HUGE_VAL: refused) or underflow (1e-320, a denormal or 0: a value).
+  return end == s.c_str() + s.size() && !(errno == ERANGE && std::isinf(*v));
 }
 
 bool toInt(const std::string& s, int64_t* v) {
@@ -47,7 +49,8 @@ bool toInt(const std::string& s, int64_t* v) {
 template <class Row>
 bool parseTable(const std::string& text, const std::string& name, const std::string& header, Row row,
                 std::string* error) {
-  std::istringstream in(text);
+  // A UTF-8 byte order mark (spreadsheets write one) is not part of the header.
+  std::istringstream in(text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? text.substr(3) : text);
   std::string line;
   int lineno = 0;
   bool have_header = false;

@@ -34,9 +34,10 @@ struct Scenario {
   std::vector<core::Pose> truth;  ///< empty without groundtruth.csv
 };
 
-/// Parses CSV text of one of the three files. On error returns false and sets `error` to
-/// "<name>:<line>: what". Values are parsed, not judged: NaN or an unknown index is the
-/// verifier's business.
+/// Parses CSV text of one of the three files (a leading UTF-8 byte order mark is skipped). On
+/// error returns false and sets `error` to "<name>:<line>: what". Values are parsed, not judged:
+/// NaN, a denormal like 1e-320 or an unknown index is the verifier's business; a number beyond
+/// the range of double (1e999) is an error.
 bool parseKeyframes(const std::string& text, const std::string& name,
                     std::vector<ScenarioKeyframe>* out, std::string* error);
 bool parseCandidates(const std::string& text, const std::string& name,

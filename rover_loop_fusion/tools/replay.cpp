@@ -56,7 +56,7 @@ int usage(int code) {
                "verifier parameters (applied in order; --config FILE reads a verifier YAML such as\n"
                "config/rover_indoor.yaml; the defaults are that file's; a boolean flag alone means true):\n");
   for (const core::Parameter& p : core::verifierParameters())
-    std::fprintf(out, "  --%-26s %-18s default %-7s %s\n", p.name.c_str(), p.range().c_str(),
+    std::fprintf(out, "  --%-26s %-22s default %-7s %s\n", p.name.c_str(), p.range().c_str(),
                  p.defaultText().c_str(), p.doc.c_str());
   return code;
 }
@@ -206,6 +206,7 @@ int main(int argc, char** argv) {
       if (!quiet) std::printf("keyframe refused: %s\n", st.message.c_str());
       continue;
     }
+    if (st.warning() && !quiet) std::printf("keyframe warning: %s\n", st.message.c_str());
     stamp_of[k.index] = k.stamp;
     stamps.push_back(k.stamp);
     odometry.push_back(k.vio);

@@ -45,9 +45,25 @@ TEST(Decision, InnovationGateBoundGrowsWithThePath) {
   EXPECT_FALSE(far.passed);
   EXPECT_EQ(far.reason, Reason::kInnovationAboveBound);
   EXPECT_NE(far.detail.find("innovation 0.710 m > 0.700 m"), std::string::npos) << far.detail;
-  EXPECT_FALSE(innovationGate(c, kNaN, 10.0).passed) << "an innovation that is not a number fails";
   c.max_innovation = 0.0;
   EXPECT_TRUE(innovationGate(c, 50.0, 10.0).passed) << "max_innovation 0: no gate";
+}
+
+TEST(Decision, InnovationGateFailsClosedWhenItsInputsAreNotFinite) {
+  // Red team: a path length of inf (one keyframe at x += 1e155) skipped the gate for the rest
+  // of the run. Whatever makes an input non-finite, the gate rejects and says why.
+  VerifierConfig c;
+  for (double innovation : {0.1, kNaN, kInf}) {
+    for (double path : {10.0, kInf, kNaN}) {
+      if (std::isfinite(innovation) && std::isfinite(path)) continue;
+      const Check g = innovationGate(c, innovation, path);
+      EXPECT_FALSE(g.passed) << innovation << " " << path;
+      EXPECT_EQ(g.reason, Reason::kInvalidInput);
+      EXPECT_NE(g.detail.find("not finite"), std::string::npos) << g.detail;
+    }
+  }
+  c.max_innovation_per_metre = 2.0;  // (beyond the parameter's range: the function must not care)
+  EXPECT_FALSE(innovationGate(c, 0.1, std::numeric_limits<double>::max()).passed) << "the bound overflows";
 }
 
 TEST(Decision, ScoreTestAcceptsOnlyAConvergedFiniteSolutionUnderTheThreshold) {

@@ -30,6 +30,30 @@ TEST(ScenarioIo, ParsesKeyframesAndCandidates) {
   EXPECT_TRUE(std::isnan(c[1].candidate.relative_t.x()));  // parsed, judged by the verifier
 }
 
+TEST(ScenarioIo, ReadsAByteOrderMarkAndDenormalValues) {
+  // Red team: rover_replay refused 1e-320 (strtod's ERANGE on underflow) and a file saved with
+  // a UTF-8 byte order mark (the header did not match).
+  std::vector<ScenarioKeyframe> k;
+  std::string err;
+  ASSERT_TRUE(parseKeyframes("\xEF\xBB\xBFindex,stamp,sequence,x,y,z,qx,qy,qz,qw\n0,1.5,1,1e-320,0,0,0,0,0,1\n", "k",
+                             &k, &err))
+      << err;
+  ASSERT_EQ(k.size(), 1u);
+  EXPECT_GT(k[0].vio.t.x(), 0.0);
+  EXPECT_LT(k[0].vio.t.x(), 1e-300);
+  std::vector<ScenarioCandidate> c;
+  ASSERT_TRUE(parseCandidates("\xEF\xBB\xBFquery_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label\n"
+                              "120,4,1e-320,0,0,0,0,0,1,4.9e-324,31,1\n",
+                              "c", &c, &err))
+      << err;
+  EXPECT_EQ(c.size(), 1u);
+  // Beyond the range of double is still an error, saying where.
+  EXPECT_FALSE(parseKeyframes("index,stamp,sequence,x,y,z,qx,qy,qz,qw\n0,1.5,1,1e999,0,0,0,0,0,1\n", "k", &k, &err));
+  EXPECT_NE(err.find("k:2"), std::string::npos) << err;
+  // A byte order mark anywhere but at the start is not skipped.
+  EXPECT_FALSE(parseKeyframes("# c\n\xEF\xBB\xBFindex,stamp,sequence,x,y,z,qx,qy,qz,qw\n", "k", &k, &err));
+}
+
 TEST(ScenarioIo, MalformedInputSaysWhereAndWhat) {
   std::vector<ScenarioKeyframe> k;
   std::string err;

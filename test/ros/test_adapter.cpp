@@ -4,9 +4,10 @@
 // launch/vins_rover.launch, which adapter.test mirrors by loading config/rover_indoor.yaml
 // into /loop_fusion/rover.
 //
-// FakePoseGraph below is PoseGraph::addKeyFrame / loadKeyFrame / setIMUFlag of loop_fusion
-// reduced to the state the patch touches (has_loop, earliest_loop_index, the sequence shift
-// w_r_vio / w_t_vio, optimize_buf), with the adapter calls exactly where the patch makes them.
+// FakePoseGraph below is PoseGraph::addKeyFrame / loadKeyFrame / setIMUFlag / savePoseGraph /
+// loadPoseGraph of loop_fusion reduced to the state the patch touches (has_loop, loop_index,
+// loop_info, earliest_loop_index, the sequence shift w_r_vio / w_t_vio, optimize_buf), with the
+// adapter calls exactly where the patch makes them.
 #include "rover_loop_fusion/LoopCandidate.h"
 #include "rover_loop_fusion/LoopVerdict.h"
 #include "rover_loop_fusion/core/verdict_csv.h"
@@ -18,17 +19,24 @@
 #include <gtest/gtest.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
+#include <rosgraph_msgs/Log.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <mutex>
+#include <set>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 using namespace rover_loop_fusion;
@@ -63,6 +71,7 @@ struct FakeKeyFrame {
   bool has_loop = false;
   int loop_index = -1;
   LoopInfo loop_info = LoopInfo::Zero();
+  int loop_inliers = -1;  // patch: the PnP inlier count findConnection keeps
 };
 
 /// Utility::R2ypr(R).x() of loop_fusion: yaw in degrees.
@@ -77,6 +86,7 @@ Eigen::Matrix3d yawR(double yaw_deg) {
 struct Detection {
   int loop_index;
   LoopInfo loop_info;
+  int inliers = -1;
 };
 
 class FakePoseGraph {
@@ -118,15 +128,15 @@ class FakePoseGraph {
     int loop_index = detection ? detection->loop_index : -1;
     if (loop_index != -1) {
       const FakeKeyFrame& old_kf = keyframelist.at(loop_index);
-      // findConnection(old_kf) succeeded: it sets has_loop, loop_index, loop_info
+      // findConnection(old_kf) succeeded: it sets has_loop, loop_index, loop_info (and, patched,
+      // loop_inliers)
       cur_kf.has_loop = true;
       cur_kf.loop_index = old_kf.index;
       cur_kf.loop_info = detection->loop_info;
+      cur_kf.loop_inliers = detection->inliers;
       // patch: the hook after findConnection
-      bool use_loop = true;
-      if (use_loop && !rover.verifyLoop(cur_kf.index, old_kf.index, cur_kf.loop_info))
-        use_loop = cur_kf.has_loop = false;
-      if (use_loop) {
+      if (rover.verifyKeyframeLoop(cur_kf.index, cur_kf.loop_inliers, cur_kf.has_loop, cur_kf.loop_index,
+                                   cur_kf.loop_info)) {
         if (earliest_loop_index > loop_index || earliest_loop_index == -1) earliest_loop_index = loop_index;
         const Eigen::Vector3d w_P_old = old_kf.vio_T_w_i;
         const Eigen::Matrix3d w_R_old = old_kf.vio_R_w_i;
@@ -159,20 +169,65 @@ class FakePoseGraph {
   }
 
   /// PoseGraph::loadKeyFrame as loadPoseGraph calls it (flag_detect_loop = 0): keyframes of
-  /// a saved graph, sequence 0, with their stored loops. Returns what commitStoredLoop said
-  /// (the patch ignores it).
+  /// a saved graph, sequence 0, with their stored loops. Returns false if the keyframe's
+  /// stored loop was dropped.
   bool loadKeyFrame(FakeKeyFrame cur_kf) {
     cur_kf.index = global_index;
     global_index++;
     cur_kf.sequence = 0;
-    // patch: register the keyframe, commit its stored loop
-    rover.addKeyframe(cur_kf.index, cur_kf.time_stamp, cur_kf.sequence, cur_kf.vio_T_w_i, cur_kf.vio_R_w_i);
-    bool committed = true;
-    if (cur_kf.has_loop) committed = rover.commitStoredLoop(cur_kf.index, cur_kf.loop_index, cur_kf.loop_info);
-    if (cur_kf.loop_index != -1)
+    if (cur_kf.loop_index != -1)  // loadPoseGraph, before loadKeyFrame
       if (earliest_loop_index > cur_kf.loop_index || earliest_loop_index == -1) earliest_loop_index = cur_kf.loop_index;
+    // patch: register the keyframe, keep its stored loop if the verifier takes it
+    const bool had_loop = cur_kf.has_loop;
+    rover.addKeyframe(cur_kf.index, cur_kf.time_stamp, cur_kf.sequence, cur_kf.vio_T_w_i, cur_kf.vio_R_w_i);
+    rover.keepStoredLoop(cur_kf.index, cur_kf.has_loop, cur_kf.loop_index, cur_kf.loop_info);
     keyframelist[cur_kf.index] = cur_kf;
-    return committed;
+    return !had_loop || cur_kf.has_loop;
+  }
+
+  /// PoseGraph::savePoseGraph's pose_graph.txt: one line per keyframe with the fields and the
+  /// format loop_fusion writes (no optimisation here: the pose-graph pose is the VIO pose; no
+  /// keypoints).
+  void savePoseGraph(const std::string& path) const {
+    FILE* f = std::fopen(path.c_str(), "w");
+    ASSERT_TRUE(f) << path;
+    for (const auto& entry : keyframelist) {
+      const FakeKeyFrame& kf = entry.second;
+      const Eigen::Quaterniond q(kf.vio_R_w_i);
+      const Eigen::Vector3d& t = kf.vio_T_w_i;
+      std::fprintf(f, " %d %f %f %f %f %f %f %f %f %f %f %f %f %f %f %f %d %f %f %f %f %f %f %f %f %d\n", kf.index,
+                   kf.time_stamp, t.x(), t.y(), t.z(), t.x(), t.y(), t.z(), q.w(), q.x(), q.y(), q.z(), q.w(), q.x(),
+                   q.y(), q.z(), kf.loop_index, kf.loop_info(0), kf.loop_info(1), kf.loop_info(2), kf.loop_info(3),
+                   kf.loop_info(4), kf.loop_info(5), kf.loop_info(6), kf.loop_info(7), 0);
+    }
+    std::fclose(f);
+  }
+
+  /// PoseGraph::loadPoseGraph: reads pose_graph.txt as loop_fusion does; the load constructor of
+  /// KeyFrame takes the pose-graph pose and has_loop = (loop_index != -1). Returns the
+  /// keyframes read.
+  int loadPoseGraph(const std::string& path) {
+    FILE* f = std::fopen(path.c_str(), "r");
+    if (!f) return -1;
+    int index, loop_index, keypoints_num, n = 0;
+    double stamp, vt[3], pt[3], vq[4], pq[4], li[8];
+    while (std::fscanf(f, "%d %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %lf %d %lf %lf %lf %lf %lf %lf %lf %lf %d",
+                       &index, &stamp, &vt[0], &vt[1], &vt[2], &pt[0], &pt[1], &pt[2], &vq[0], &vq[1], &vq[2], &vq[3],
+                       &pq[0], &pq[1], &pq[2], &pq[3], &loop_index, &li[0], &li[1], &li[2], &li[3], &li[4], &li[5],
+                       &li[6], &li[7], &keypoints_num) != EOF) {
+      FakeKeyFrame kf;
+      kf.index = index;
+      kf.time_stamp = stamp;
+      kf.vio_T_w_i = Eigen::Vector3d(pt[0], pt[1], pt[2]);
+      kf.vio_R_w_i = Eigen::Quaterniond(pq[0], pq[1], pq[2], pq[3]).toRotationMatrix();
+      kf.has_loop = loop_index != -1;
+      kf.loop_index = loop_index;
+      for (int i = 0; i < 8; ++i) kf.loop_info(i) = li[i];
+      loadKeyFrame(kf);
+      ++n;
+    }
+    std::fclose(f);
+    return n;
   }
 };
 
@@ -262,8 +317,61 @@ class Listener {
   ros::Subscriber verdict_sub_, marker_sub_;
 };
 
+/// What this node logs, as it arrives on /rosout (from the node's own publisher).
+class LogCapture {
+ public:
+  LogCapture() : nh_("~") { sub_ = nh_.subscribe("/rosout", 10000, &LogCapture::on, this); }
+  bool connect() { return spinUntil([&] { return sub_.getNumPublishers() > 0; }); }
+  /// The first message at `level` that contains every part, waiting for it (bounded); "" if none.
+  std::string waitFor(uint8_t level, const std::vector<std::string>& parts) {
+    std::string found;
+    spinUntil([&] {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (const rosgraph_msgs::Log& m : msgs_) {
+        if (m.level != level) continue;
+        bool all = true;
+        for (const std::string& p : parts) all = all && m.msg.find(p) != std::string::npos;
+        if (all) {
+          found = m.msg;
+          return true;
+        }
+      }
+      return false;
+    }, 20.0);
+    return found;
+  }
+  size_t count(uint8_t level, const std::string& part) {
+    ros::spinOnce();
+    std::lock_guard<std::mutex> lock(mutex_);
+    size_t n = 0;
+    for (const rosgraph_msgs::Log& m : msgs_) n += m.level == level && m.msg.find(part) != std::string::npos;
+    return n;
+  }
+
+ private:
+  template <typename F>
+  static bool spinUntil(F done, double seconds = 60.0) {
+    const ros::WallTime give_up = ros::WallTime::now() + ros::WallDuration(seconds);
+    while (!done()) {
+      if (ros::WallTime::now() > give_up || !ros::ok()) return false;
+      ros::spinOnce();
+      ros::WallDuration(0.005).sleep();
+    }
+    return true;
+  }
+  void on(const rosgraph_msgs::Log& m) {
+    if (m.name != ros::this_node::getName()) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    msgs_.push_back(m);
+  }
+  ros::NodeHandle nh_;
+  ros::Subscriber sub_;
+  std::mutex mutex_;
+  std::vector<rosgraph_msgs::Log> msgs_;
+};
+
 const char* const kAdapterParams[] = {"verifier_type", "verifier_name", "fallback_to_accept_all",
-                                      "verdict_log", "marker_frame", "publish_markers"};
+                                      "verdict_log", "marker_frame", "publish_markers", "relocalisation"};
 
 class Adapter : public ::testing::Test {
  protected:
@@ -308,16 +416,21 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
   ASSERT_TRUE(listen.connect());
 
   std::vector<FakeKeyFrame> looped;
+  const int inliers[] = {31, 47};  // PnP inliers findConnection keeps on the keyframe (patch)
   for (const sim::SimKeyframe& k : s.keyframes) {
     std::unique_ptr<Detection> d;
-    for (const sim::SimCandidate* c : picks)
-      if (c->candidate.query_index == k.index) d.reset(new Detection{static_cast<int>(c->candidate.match_index), loopInfo(c->candidate)});
+    for (size_t i = 0; i < 2; ++i)
+      if (picks[i]->candidate.query_index == k.index)
+        d.reset(new Detection{static_cast<int>(picks[i]->candidate.match_index), loopInfo(picks[i]->candidate), inliers[i]});
     const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(k, 1), d.get());
     if (d) {
       looped.push_back(kf);
       if (looped.size() == 1) {
-        // The false loop is rejected and touches nothing loop_fusion would act on.
+        // The false loop is rejected and touches nothing loop_fusion would act on, and is
+        // dropped from the keyframe (savePoseGraph would write loop_index otherwise).
         EXPECT_FALSE(kf.has_loop);
+        EXPECT_EQ(kf.loop_index, -1);
+        EXPECT_TRUE(kf.loop_info.isZero());
         EXPECT_EQ(pg.earliest_loop_index, -1);
         EXPECT_TRUE(pg.optimize_buf.empty());
       }
@@ -347,7 +460,8 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
   EXPECT_GT(rejected.path_length, 10.0);
   EXPECT_FALSE(rejected.converged);  // no trial solve
   EXPECT_EQ(rejected.verifier, kRover);
-  EXPECT_EQ(rejected.inliers, -1);  // loop_fusion does not hand the PnP inlier count out
+  EXPECT_EQ(rejected.inliers, 31);
+  EXPECT_EQ(accepted.inliers, 47);
   EXPECT_EQ(rejected.header.frame_id, "world");
   EXPECT_NEAR(rejected.query_stamp.toSec(), s.keyframes[rejected.query_index].stamp, 1e-6);
   EXPECT_NEAR(rejected.match_stamp.toSec(), s.keyframes[rejected.match_index].stamp, 1e-6);
@@ -398,8 +512,8 @@ TEST_F(Adapter, RejectsAFalseLoopAndAcceptsATrueOneAsThePatchUsesThem) {
     EXPECT_TRUE(contains(rows[i + 1], "," + std::to_string(v.query_index) + "," + std::to_string(v.match_index) +
                                           (v.accepted ? ",1,accepted," : ",0," + v.reason + ",")))
         << rows[i + 1];
-    // inliers (-1: loop_fusion does not hand them out), innovation, path_length, verifier
-    EXPECT_TRUE(contains(rows[i + 1], std::string(",-1,"))) << rows[i + 1];
+    // inliers, innovation, path_length, verifier
+    EXPECT_TRUE(contains(rows[i + 1], "," + std::to_string(inliers[i]) + ",")) << rows[i + 1];
     EXPECT_TRUE(contains(rows[i + 1], std::string(",") + kRover + ",")) << rows[i + 1];
   }
   std::remove(log.c_str());
@@ -426,17 +540,15 @@ TEST_F(Adapter, SixDofPoseGraphWithoutImu) {
   EXPECT_EQ(has_loop, (std::vector<bool>{false, true}));
 }
 
-TEST_F(Adapter, LoadedPoseGraphThenANewSession) {
-  // loadPoseGraph: laps 1-2 of a scene are the saved graph (sequence 0, with its stored
-  // loops); lap 3 is a new session (sequence 1) in its own VIO frame.
+namespace {
+
+/// loadPoseGraph: laps 1-2 of a corridor are a saved graph (sequence 0, with its stored
+/// loops); lap 3 is a new session (sequence 1) in its own VIO frame. Returns the keyframes of
+/// the session's first three (true) loops into the map, as stored.
+std::vector<FakeKeyFrame> loadedMapThenNewSession(FakePoseGraph& pg) {
   const sim::Scene s = corridor(3);
   const int per_lap = static_cast<int>(s.keyframes.size() / 3);
   const std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(s);
-  FakePoseGraph pg;
-  ASSERT_TRUE(pg.setIMUFlag(true));
-  Listener listen;
-  ASSERT_TRUE(listen.connect());
-
   int stored = 0;
   for (int i = 0; i < 2 * per_lap; ++i) {
     FakeKeyFrame kf = keyframe(s.keyframes[i], 0);
@@ -449,7 +561,7 @@ TEST_F(Adapter, LoadedPoseGraphThenANewSession) {
     }
     EXPECT_TRUE(pg.loadKeyFrame(kf)) << "stored loop of keyframe " << i;
   }
-  ASSERT_GT(stored, 2);
+  EXPECT_GT(stored, 2);
   EXPECT_EQ(pg.rover.verdictCount(), 0u);  // stored loops are not verdicts
 
   // The new session starts in its own VIO frame.
@@ -466,10 +578,49 @@ TEST_F(Adapter, LoadedPoseGraphThenANewSession) {
     const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(s.keyframes[i], 1, frame), d.get());
     if (d) looped.push_back(kf);
   }
+  EXPECT_EQ(looped.size(), 3u);
+  return looped;
+}
+
+}  // namespace
+
+TEST_F(Adapter, FirstLoopIntoALoadedMapIsRejectedByDefault) {
+  // ~relocalisation: reject (the default): a loop between sequences that nothing connects has
+  // no trajectory prior to be verified against, and it is the loop that would move the whole
+  // session. It is rejected and dropped; loop_fusion does not shift the session for it.
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  const std::vector<FakeKeyFrame> looped = loadedMapThenNewSession(pg);
+  ASSERT_EQ(looped.size(), 3u);
+  const int earliest_of_the_map = pg.earliest_loop_index;
+  ASSERT_TRUE(listen.waitFor(3, 3));
+  for (size_t i = 0; i < 3; ++i) {
+    EXPECT_FALSE(looped[i].has_loop);
+    EXPECT_EQ(looped[i].loop_index, -1);
+    EXPECT_FALSE(listen.verdicts_[i].accepted);
+    EXPECT_EQ(listen.verdicts_[i].reason, LoopVerdict::NO_TRAJECTORY_PRIOR) << listen.verdicts_[i].detail;
+    EXPECT_TRUE(contains(listen.verdicts_[i].detail, "relocalisation: reject")) << listen.verdicts_[i].detail;
+  }
+  EXPECT_EQ(pg.sequence_loop[1], 0);
+  EXPECT_TRUE(pg.w_r_vio.isIdentity());
+  EXPECT_TRUE(pg.w_t_vio.isZero());
+  EXPECT_EQ(pg.earliest_loop_index, earliest_of_the_map);
+  EXPECT_TRUE(pg.optimize_buf.empty());
+}
+
+TEST_F(Adapter, LoadedPoseGraphThenANewSessionWithRelocalisationAcceptUnverified) {
+  ros::param::set("~relocalisation", "accept_unverified");
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  const std::vector<FakeKeyFrame> looped = loadedMapThenNewSession(pg);
   ASSERT_EQ(looped.size(), 3u);
   ASSERT_TRUE(listen.waitFor(3, 3));
-  // The first loop into the loaded map has no trajectory prior (accept_without_prior: true),
-  // is used, and shifts the session into the map's frame (sequence_loop, w_r_vio).
+  // The first loop into the loaded map has no trajectory prior, is used unverified, and
+  // shifts the session into the map's frame (sequence_loop, w_r_vio).
   EXPECT_TRUE(looped[0].has_loop);
   EXPECT_EQ(listen.verdicts_[0].reason, LoopVerdict::NO_TRAJECTORY_PRIOR);
   EXPECT_TRUE(listen.verdicts_[0].accepted);
@@ -483,34 +634,81 @@ TEST_F(Adapter, LoadedPoseGraphThenANewSession) {
   EXPECT_EQ(pg.optimize_buf.size(), 3u);
 }
 
-TEST_F(Adapter, RejectedFirstLoopIntoAMapLeavesTheSequenceShiftAlone) {
-  // accept_without_prior: false (its own verifier namespace): the first loop of a new session
-  // has no prior and is rejected; loop_fusion must not shift the session for it.
-  ros::param::set("~verifier_name", "strict");
-  ros::param::set("~strict/accept_without_prior", false);
-  const sim::Scene s = corridor(2);
-  const int per_lap = static_cast<int>(s.keyframes.size() / 2);
-  const std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(s);
+TEST_F(Adapter, HostDerivedKeysInTheVerifierYamlAreIgnoredWithAnError) {
+  // anchor_incoming_keyframes: true would make the verifier shift the session a second time on
+  // top of loop_fusion's w_r_vio / w_t_vio (later loops would look metres off and be rejected);
+  // accept_without_prior: false would override ~relocalisation. Both come from the host.
+  ros::param::set("~relocalisation", "accept_unverified");
+  ros::param::set("~rover/anchor_incoming_keyframes", true);
+  ros::param::set("~rover/accept_without_prior", false);
+  LogCapture log;
+  ASSERT_TRUE(log.connect());
+  FakePoseGraph pg;
+  const bool started = pg.setIMUFlag(true);
+  ros::param::del("~rover/anchor_incoming_keyframes");
+  ros::param::del("~rover/accept_without_prior");
+  ASSERT_TRUE(started);
+  for (const char* key : {"/loop_fusion/rover/anchor_incoming_keyframes", "/loop_fusion/rover/accept_without_prior"})
+    EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::ERROR, {key, "ignored", "host"}).empty()) << key;
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  const std::vector<FakeKeyFrame> looped = loadedMapThenNewSession(pg);
+  ASSERT_EQ(looped.size(), 3u);
+  ASSERT_TRUE(listen.waitFor(3, 3));
+  EXPECT_TRUE(listen.verdicts_[0].accepted) << listen.verdicts_[0].detail;
+  for (size_t i = 1; i < 3; ++i) {
+    EXPECT_EQ(listen.verdicts_[i].reason, LoopVerdict::ACCEPTED) << listen.verdicts_[i].detail;
+    EXPECT_LT(listen.verdicts_[i].score, 0.2) << listen.verdicts_[i].detail;
+  }
+}
+
+TEST_F(Adapter, EveryDecisionParameterIsLoggedAtStartUp) {
+  LogCapture log;
+  ASSERT_TRUE(log.connect());
   FakePoseGraph pg;
   ASSERT_TRUE(pg.setIMUFlag(true));
-  for (int i = 0; i < per_lap; ++i) pg.loadKeyFrame(keyframe(s.keyframes[i], 0));
-  const FakeKeyFrame* looped = nullptr;
-  for (int i = per_lap; i < 2 * per_lap && !looped; ++i) {
-    std::unique_ptr<Detection> d;
-    auto c = candidates.find(i);
-    if (c != candidates.end() && c->second->is_true)
-      d.reset(new Detection{static_cast<int>(c->second->candidate.match_index), loopInfo(c->second->candidate)});
-    const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(s.keyframes[i], 1), d.get());
-    if (d) looped = &kf;
+  const std::string line = log.waitFor(rosgraph_msgs::Log::INFO, {"decision parameters"});
+  ASSERT_FALSE(line.empty());
+  for (const std::string& name : verifierParameterNames())
+    EXPECT_TRUE(contains(line, " " + name + "=") || contains(line, ": " + name + "=")) << name << " not in: " << line;
+  EXPECT_TRUE(contains(line, "max_innovation=0.5 max_innovation_per_metre=0.02")) << line;  // rover_indoor.yaml
+  EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::INFO, {"relocalisation: reject"}).empty());
+}
+
+TEST_F(Adapter, RejectedLoopsAreNotSavedInThePoseGraph) {
+  // A run with false and true candidates, saved as savePoseGraph writes pose_graph.txt and
+  // loaded as loadPoseGraph reads it (loop_index != -1 is a loop): the file holds exactly the
+  // accepted loops, and the next run commits all of them.
+  const std::string file = tempFile("pose_graph.txt");
+  const sim::Scene s = corridor(2);
+  const std::map<int64_t, const sim::SimCandidate*> candidates = byQuery(s);
+  std::set<int> accepted, rejected;
+  {
+    FakePoseGraph pg;
+    ASSERT_TRUE(pg.setIMUFlag(true));
+    for (const sim::SimKeyframe& k : s.keyframes) {
+      std::unique_ptr<Detection> d;
+      auto c = candidates.find(k.index);
+      if (c != candidates.end())
+        d.reset(new Detection{static_cast<int>(c->second->candidate.match_index), loopInfo(c->second->candidate)});
+      const FakeKeyFrame& kf = pg.addKeyFrame(keyframe(k, 1), d.get());
+      if (d) (kf.has_loop ? accepted : rejected).insert(kf.index);
+    }
+    ASSERT_GT(accepted.size(), 2u);
+    ASSERT_GT(rejected.size(), 2u);
+    pg.savePoseGraph(file);
   }
-  ros::param::del("~strict");
-  ASSERT_TRUE(looped);
-  EXPECT_FALSE(looped->has_loop);
-  EXPECT_EQ(pg.sequence_loop[1], 0);
-  EXPECT_TRUE(pg.w_r_vio.isIdentity());
-  EXPECT_TRUE(pg.w_t_vio.isZero());
-  EXPECT_EQ(pg.earliest_loop_index, -1);
-  EXPECT_TRUE(pg.optimize_buf.empty());
+  FakePoseGraph next;
+  ASSERT_TRUE(next.setIMUFlag(true));
+  ASSERT_EQ(next.loadPoseGraph(file), static_cast<int>(s.keyframes.size()));
+  std::set<int> stored;
+  for (const auto& kf : next.keyframelist) {
+    if (kf.second.loop_index != -1) stored.insert(kf.first);
+    EXPECT_EQ(kf.second.has_loop, kf.second.loop_index != -1) << kf.first;
+  }
+  EXPECT_EQ(stored, accepted);
+  for (int i : rejected) EXPECT_TRUE(next.keyframelist.at(i).loop_info.isZero()) << i;
+  std::remove(file.c_str());
 }
 
 // ---- plugin selection ----------------------------------------------------------------------
@@ -606,7 +804,8 @@ struct HostRun {
 /// `name`, whose private parameters the caller has set.
 HostRun runHost(const std::string& name) {
   HostRun r;
-  const std::string cmd = std::string(ROVER_ADAPTER_HOST) + " __name:=" + name + " 2>&1";
+  // A host that hangs (e.g. opening a FIFO) is killed after 60 s: exit code 124.
+  const std::string cmd = "timeout -k 5 60 " + std::string(ROVER_ADAPTER_HOST) + " __name:=" + name + " 2>&1";
   FILE* p = ::popen(cmd.c_str(), "r");
   if (!p) return r;
   char buf[4096];
@@ -660,6 +859,37 @@ TEST(AdapterStop, UnwritableVerdictLogStops) {
   const HostRun r = runHost("rover_host_log");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_TRUE(contains(r.output, "/rover_host_log/verdict_log")) << r.output;
+}
+
+TEST(AdapterStop, AVerdictLogFifoWithoutReaderDoesNotBlockStartUp) {
+  // open() of a FIFO for writing waits for a reader: loop_fusion would never get past
+  // setIMUFlag. The log is opened without blocking, and the rows wait for a reader.
+  const std::string fifo = tempFile("verdicts.fifo");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  ros::param::set("/rover_host_fifo/verdict_log", fifo);
+  const HostRun r = runHost("rover_host_fifo");
+  std::remove(fifo.c_str());
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "host: initialize returned true")) << r.output;
+  EXPECT_TRUE(contains(r.output, "host: verifyLoop returned")) << r.output;
+  EXPECT_TRUE(contains(r.output, "has no reader yet")) << r.output;
+  EXPECT_TRUE(contains(r.output, "were not written")) << "the lost rows are reported: " << r.output;
+}
+
+TEST(AdapterStop, UnknownKeysInTheAdapterNamespaceAreReported) {
+  ros::param::set("/rover_host_typo/verdict_logg", std::string("/tmp/x.csv"));
+  ros::param::set("/rover_host_typo/rovr/threshold", 0.3);
+  const HostRun r = runHost("rover_host_typo");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "unknown parameter /rover_host_typo/verdict_logg")) << r.output;
+  EXPECT_TRUE(contains(r.output, "unknown parameter namespace /rover_host_typo/rovr/")) << r.output;
+}
+
+TEST(AdapterStop, BadRelocalisationPolicyStops) {
+  ros::param::set("/rover_host_reloc/relocalisation", std::string("accept"));
+  const HostRun r = runHost("rover_host_reloc");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "/rover_host_reloc/relocalisation must be reject or accept_unverified")) << r.output;
 }
 
 // ---- host safety ---------------------------------------------------------------------------
@@ -718,8 +948,9 @@ TEST_F(Adapter, ExceptionsFromTheVerifierNeverReachTheHostAndRejectTheLoop) {
       {"commit throws a non-std exception", &MisbehavingVerifier::throw_on_commit, false, "exception"},
       {"commit refused", &MisbehavingVerifier::refuse_commit, false, "refused to commit it: no room"},
       {"addKeyframe throws", &MisbehavingVerifier::throw_on_add, true, ""},
-      // publishing fails after the commit: the loop is in the verifier's graph, so it is used
-      {"trajectory (markers) throws", &MisbehavingVerifier::throw_on_trajectory, true, nullptr},
+      // drawing the marker fails after the commit: the loop is used and its verdict published
+      // (every committed loop has exactly one verdict), without the marker
+      {"trajectory (markers) throws", &MisbehavingVerifier::throw_on_trajectory, true, ""},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.what);
@@ -730,10 +961,7 @@ TEST_F(Adapter, ExceptionsFromTheVerifierNeverReachTheHostAndRejectTheLoop) {
     Listener listen;
     ASSERT_TRUE(listen.connect());
     EXPECT_EQ(oneLoop(rover), c.used);
-    if (!c.detail) {
-      EXPECT_EQ(rover.verdictCount(), 0u);  // the verdict could not be published
-      continue;
-    }
+    EXPECT_EQ(rover.verdictCount(), 1u);
     ASSERT_TRUE(listen.waitFor(1, 0));
     EXPECT_EQ(listen.verdicts_[0].accepted, c.used);
     EXPECT_EQ(listen.verdicts_[0].verifier, "test/Misbehaving");
@@ -787,6 +1015,81 @@ TEST_F(Adapter, BadCandidatesAreRejectedNotThrown) {
   pg.rover.addKeyframe(3, 0.5, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());  // stamp goes back
   pg.rover.addKeyframe(4, 9.0, 1, Eigen::Vector3d::Constant(nan), Eigen::Matrix3d::Identity());
   EXPECT_FALSE(pg.rover.verifyLoop(4, 0, (LoopInfo() << 0, 0, 0, 1, 0, 0, 0, 0).finished()));
+}
+
+TEST_F(Adapter, EveryCommittedLoopGetsItsVerdictWhateverTheStamps) {
+  // Stamps beyond ros::Time's range (ros::Time(double) throws for them) must not cost the
+  // verdict of a loop that was committed: it is published with the stamp saturated.
+  LoopFusionAdapter rover;
+  ASSERT_TRUE(rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new MisbehavingVerifier), "test/Accept"));
+  Listener listen;
+  ASSERT_TRUE(listen.connect());
+  rover.addKeyframe(0, 4294967295.25, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());
+  rover.addKeyframe(1, 1e300, 1, Eigen::Vector3d(1, 0, 0), Eigen::Matrix3d::Identity());
+  LoopInfo info;
+  info << 1, 0, 0, 1, 0, 0, 0, 0;
+  EXPECT_TRUE(rover.verifyLoop(1, 0, info));
+  EXPECT_EQ(rover.verdictCount(), 1u);
+  ASSERT_TRUE(listen.waitFor(1, 0));
+  EXPECT_TRUE(listen.verdicts_[0].accepted);
+  EXPECT_EQ(listen.verdicts_[0].query_stamp, ros::TIME_MAX);
+}
+
+TEST_F(Adapter, AStalledVerdictLogReaderNeverHoldsUpVerification) {
+  // The CSV log is written on its own thread: with a FIFO whose reader does not read, the
+  // pipe fills after a few hundred rows, and verifyLoop must still return for every loop.
+  const std::string fifo = tempFile("stalled.fifo");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  ASSERT_GE(reader, 0);
+  ros::param::set("~verdict_log", fifo);
+  const int n = 3000;  // ~600 kB of rows: ten times a pipe's buffer
+  std::atomic<bool> done(false);
+  std::atomic<int> used(0);
+  {
+    LoopFusionAdapter rover;
+    ASSERT_TRUE(rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new MisbehavingVerifier), "test/Accept"));
+    std::thread host([&] {
+      rover.addKeyframe(0, 1.0, 1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity());
+      rover.addKeyframe(1, 2.0, 1, Eigen::Vector3d(1, 0, 0), Eigen::Matrix3d::Identity());
+      LoopInfo info;
+      info << 1, 0, 0, 1, 0, 0, 0, 0;
+      for (int i = 0; i < n; ++i) used += rover.verifyLoop(1, 0, info);
+      done = true;
+    });
+    // Liveness, not speed: the reader starts reading when the host is done, or after 30 s.
+    for (int i = 0; i < 3000 && !done; ++i) ros::WallDuration(0.01).sleep();
+    const bool finished_while_stalled = done;
+    std::string text;
+    char buf[65536];
+    int lines = 0;
+    const ros::WallTime give_up = ros::WallTime::now() + ros::WallDuration(60.0);
+    while (lines < n + 1 && ros::WallTime::now() < give_up) {
+      const ssize_t got = ::read(reader, buf, sizeof(buf));
+      if (got > 0) {
+        for (ssize_t i = 0; i < got; ++i) lines += buf[i] == '\n';
+      } else {
+        ros::WallDuration(0.01).sleep();
+      }
+    }
+    host.join();
+    EXPECT_TRUE(finished_while_stalled) << "verifyLoop waited for the verdict log's reader";
+    EXPECT_EQ(used.load(), n);
+    EXPECT_EQ(lines, n + 1) << "header + one row per verdict once the reader reads";
+  }
+  ::close(reader);
+  std::remove(fifo.c_str());
+}
+
+TEST_F(Adapter, VerdictLogWriteErrorsAreReported) {
+  // /dev/full: every write fails (ENOSPC). Verification goes on; the loss is an ERROR.
+  LogCapture log;
+  ASSERT_TRUE(log.connect());
+  ros::param::set("~verdict_log", std::string("/dev/full"));
+  LoopFusionAdapter rover;
+  ASSERT_TRUE(rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new MisbehavingVerifier), "test/Accept"));
+  EXPECT_TRUE(oneLoop(rover));
+  EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::ERROR, {"/dev/full", "No space left on device", "lost"}).empty());
 }
 
 // ---- ~loop_candidates: what a recorded run replays through rover_verifier_node --------------

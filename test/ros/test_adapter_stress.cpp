@@ -2,9 +2,10 @@
 // PoseGraph::addKeyFrame) while loop_fusion's optimisation thread solves the pose graph
 // every few milliseconds under the keyframe-list mutex and ROS spinner threads deliver
 // messages, including the verdicts and markers the adapter publishes. The test checks that
-// every candidate gets exactly one verdict on the topic and that the has_loop decisions
-// match them; built with -DROVER_TSAN=ON and run by hand it is the ThreadSanitizer stress
-// test (docs/testing.md, ThreadSanitizer).
+// every candidate gets exactly one verdict on the topic and one row in the CSV log (written on
+// its own thread) and that the has_loop decisions match them. scripts/sanitize.sh tsan (part
+// of scripts/test.sh) also runs it built with -DROVER_TSAN=ON: the ThreadSanitizer stress test
+// of the adapter.
 #include "rover_loop_fusion/LoopVerdict.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
@@ -14,8 +15,14 @@
 #include <ros/ros.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <unistd.h>
+
 #include <atomic>
+#include <cstdio>
+#include <fstream>
+#include <memory>
 #include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -49,8 +56,14 @@ TEST(AdapterStress, KeyframeThreadOptimisationThreadAndSpinners) {
   sim::LapsOptions o;
   o.laps = 3;
   const sim::Scene s = sim::makeLapsScene(o);
-  LoopFusionAdapter adapter;
+  // The CSV log's writer thread runs alongside as well.
+  const std::string log = "/tmp/rover_adapter_stress_" + std::to_string(::getpid()) + ".csv";
+  std::remove(log.c_str());
+  pnh.setParam("verdict_log", log);
+  std::unique_ptr<LoopFusionAdapter> adapter_owner(new LoopFusionAdapter);
+  LoopFusionAdapter& adapter = *adapter_owner;
   ASSERT_TRUE(adapter.initialize(true));
+  pnh.deleteParam("verdict_log");
   // Wait for our subscribers to be connected before the first verdict.
   for (int i = 0; i < 100 && (vs.getNumPublishers() == 0 || ms.getNumPublishers() == 0); ++i)
     ros::Duration(0.05).sleep();
@@ -116,6 +129,12 @@ TEST(AdapterStress, KeyframeThreadOptimisationThreadAndSpinners) {
   EXPECT_GT(optimisations.load(), 10);
   EXPECT_GT(solves_with_loops.load(), 0);
   EXPECT_EQ(mirror_errors.load(), 0);
+  adapter_owner.reset();  // flushes the verdict log
+  std::ifstream in(log);
+  size_t rows = 0;
+  for (std::string line; std::getline(in, line);) ++rows;
+  EXPECT_EQ(rows, s.candidates.size() + 1) << "header + one row per verdict in " << log;
+  std::remove(log.c_str());
 }
 
 int main(int argc, char** argv) {

@@ -75,6 +75,14 @@ class DemoLaunch(unittest.TestCase):
         self.assertEqual(params["/rover_verifier/candidate_topic"], "/loop_fusion/loop_candidates")
         self.assertEqual(params["/rover_verifier/rover/threshold"], 0.2)
         self.assertNotIn("/rover_verifier/threshold", params)
+        self.assertEqual(params["/rover_verifier/relocalisation"], "reject")
+        # Respawned when it exits (the master watchdog exits after a master restart), unless
+        # it is required (roslaunch refuses both).
+        self.assertTrue(node.respawn)
+        self.assertFalse(node.required)
+        _, nodes = load("verifier.launch", "required:=true")
+        self.assertTrue(nodes["rover_verifier"].required)
+        self.assertFalse(nodes["rover_verifier"].respawn)
         params, _ = load("verifier.launch", "name:=b", "verifier:=accept_all",
                          "verifier_config:=" + os.path.join(ROOT, "config", "rover_outdoor.yaml"))
         self.assertEqual(params["/b/verifier_type"], "accept_all")

@@ -16,13 +16,11 @@ PKG = "rover_loop_fusion"
 ROOT = rospkg.RosPack().get_path(PKG)
 LAUNCH = os.path.join(ROOT, "launch", "vins_rover.launch")
 VINS_CONFIG = "/path/to/VINS-Fusion/config/euroc/euroc_stereo_imu_config.yaml"
-PARAM_NAMES = [  # rover_loop_fusion::verifierParameterNames(); test_config.cpp checks the YAMLs
+PARAM_NAMES = [  # verifierParameterNames() but the host-derived ones; test_config.cpp checks the YAMLs
     "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "max_innovation",
-    "max_innovation_per_metre", "accept_without_prior",
-    "max_iterations", "time_budget_ms",
+    "max_innovation_per_metre", "max_iterations", "time_budget_ms",
     "function_tolerance", "odometry_neighbours", "loop_huber", "robust_candidate", "window_margin",
-    "max_relative_translation", "max_relative_yaw_deg", "quaternion_tolerance",
-    "anchor_incoming_keyframes"]
+    "max_relative_translation", "max_relative_yaw_deg", "quaternion_tolerance"]
 
 
 def load(*args):
@@ -47,6 +45,7 @@ class VinsRoverLaunch(unittest.TestCase):
         self.assertEqual(params["/loop_fusion/verdict_log"], "")
         self.assertIs(params["/loop_fusion/publish_markers"], True)
         self.assertEqual(params["/loop_fusion/marker_frame"], "world")
+        self.assertEqual(params["/loop_fusion/relocalisation"], "reject")  # fail closed
         self.assertEqual(params["/loop_fusion/rover/threshold"], 0.2)  # config/rover_indoor.yaml
         for name in PARAM_NAMES:
             self.assertIn("/loop_fusion/rover/" + name, params)
@@ -61,12 +60,14 @@ class VinsRoverLaunch(unittest.TestCase):
     def test_outdoor_config_and_other_args(self):
         params, nodes = load("verifier_config:=" + os.path.join(ROOT, "config", "rover_outdoor.yaml"),
                              "verdict_log:=/tmp/b.csv", "verifier_name:=outdoor", "rviz:=false",
-                             "estimator:=false", "fallback_to_accept_all:=true")
+                             "estimator:=false", "fallback_to_accept_all:=true",
+                             "relocalisation:=accept_unverified")
         self.assertEqual(params["/loop_fusion/outdoor/threshold"], 1.0)
         self.assertNotIn("/loop_fusion/rover/threshold", params)
         self.assertEqual(params["/loop_fusion/verifier_name"], "outdoor")
         self.assertEqual(params["/loop_fusion/verdict_log"], "/tmp/b.csv")
         self.assertIs(params["/loop_fusion/fallback_to_accept_all"], True)
+        self.assertEqual(params["/loop_fusion/relocalisation"], "accept_unverified")
         self.assertEqual(sorted(nodes), ["loop_fusion"])
 
     def test_rviz_config_shows_paths_and_verdict_markers(self):

@@ -1,0 +1,227 @@
+#include "rover_loop_fusion/ros/verdict_log.h"
+
+#include "rover_loop_fusion/ros/guarded.h"
+
+#include <ros/console.h>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <mutex>
+
+namespace rover_loop_fusion {
+
+namespace {
+
+constexpr int kPollMs = 200;  // how soon the writer notices a stop or a reader of a FIFO
+
+/// Never blocks: a FIFO without a reader fails with ENXIO instead of waiting for one.
+int openNonBlocking(const std::string& path) {
+  return ::open(path.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC | O_NONBLOCK, 0644);
+}
+
+/// Writes all of data to the non-blocking fd, waiting (in kPollMs steps) while the reader of a
+/// pipe is not reading. 0, or the errno of the failure (ECANCELED when `stop` was set).
+int writeAll(int fd, const std::string& data, const std::atomic<bool>& stop) {
+  size_t off = 0;
+  while (off < data.size()) {
+    const ssize_t w = ::write(fd, data.data() + off, data.size() - off);
+    if (w > 0) {
+      off += static_cast<size_t>(w);
+      continue;
+    }
+    if (w < 0 && errno == EINTR) continue;
+    if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+      if (stop) return ECANCELED;
+      pollfd p{fd, POLLOUT, 0};
+      ::poll(&p, 1, kPollMs);
+      continue;
+    }
+    return w < 0 ? errno : EIO;
+  }
+  return 0;
+}
+
+}  // namespace
+
+struct VerdictLog::State {
+  std::mutex mutex;
+  std::condition_variable wake;     // rows queued, or stop
+  std::condition_variable drained;  // nothing waiting
+  std::deque<std::string> queue;
+  size_t in_flight = 0;  // rows the writer took from the queue and has not finished
+  std::atomic<bool> stop{false};
+  std::string path;
+  std::string header;
+  bool header_pending = false;
+  bool regular_file = false;
+  int fd = -1;            // -1: FIFO waiting for a reader, or open failed
+  bool open_failed = false;
+  size_t max_queued = 0;
+  Stats stats;
+};
+
+VerdictLog::VerdictLog(size_t max_queued) : state_(new State) { state_->max_queued = max_queued; }
+
+VerdictLog::~VerdictLog() {
+  if (!writer_.joinable()) return;
+  flush(2.0);
+  {
+    std::lock_guard<std::mutex> lock(state_->mutex);
+    state_->stop = true;
+  }
+  state_->wake.notify_all();
+  writer_.join();
+  const Stats s = stats();
+  const size_t lost = s.waiting + s.failed + s.dropped;
+  if (lost > 0)
+    ROS_ERROR("[rover] verdict log %s: %zu of %zu verdict rows were not written (%zu write errors, %zu dropped "
+              "from a full queue, %zu still waiting at shutdown)",
+              state_->path.c_str(), lost, s.appended, s.failed, s.dropped, s.waiting);
+  if (state_->fd >= 0) ::close(state_->fd);
+}
+
+bool VerdictLog::open(const std::string& path, const std::string& header, std::string* error) {
+  State& s = *state_;
+  s.path = path;
+  s.header = header + "\n";
+  const int fd = openNonBlocking(path);
+  if (fd < 0 && errno != ENXIO) {
+    if (error) *error = "cannot open verdict log " + path + ": " + std::strerror(errno);
+    return false;
+  }
+  s.fd = fd;
+  struct stat st;
+  if (fd >= 0 && ::fstat(fd, &st) == 0) {
+    s.regular_file = S_ISREG(st.st_mode);
+    s.header_pending = !s.regular_file || st.st_size == 0;
+  } else {
+    s.header_pending = true;  // a FIFO without a reader yet
+    ROS_WARN("[rover] verdict log %s has no reader yet (a FIFO?): verdict rows wait in memory (up to %zu) "
+             "until one opens it",
+             path.c_str(), s.max_queued);
+  }
+  writer_ = std::thread(&VerdictLog::writerLoop, this);
+  return true;
+}
+
+void VerdictLog::append(const std::string& row) noexcept {
+  if (!state_ || !writer_.joinable()) return;
+  State& s = *state_;
+  guarded("verdict log: queueing a row", [&] {
+    {
+      std::lock_guard<std::mutex> lock(s.mutex);
+      ++s.stats.appended;
+      if (s.queue.size() >= s.max_queued) {
+        ++s.stats.dropped;
+        ROS_ERROR_THROTTLE(5.0, "[rover] verdict log %s: %zu rows are waiting to be written; row dropped (%zu so far)",
+                           s.path.c_str(), s.queue.size(), s.stats.dropped);
+        return;
+      }
+      s.queue.push_back(row + "\n");
+    }
+    s.wake.notify_one();
+  });
+}
+
+size_t VerdictLog::flush(double timeout_s) {
+  State& s = *state_;
+  std::unique_lock<std::mutex> lock(s.mutex);
+  if (writer_.joinable())
+    s.drained.wait_for(lock, std::chrono::duration<double>(timeout_s),
+                       [&] { return s.queue.empty() && s.in_flight == 0; });
+  return s.queue.size() + s.in_flight;
+}
+
+VerdictLog::Stats VerdictLog::stats() const {
+  std::lock_guard<std::mutex> lock(state_->mutex);
+  Stats out = state_->stats;
+  out.waiting = state_->queue.size() + state_->in_flight;
+  return out;
+}
+
+void VerdictLog::writerLoop() {
+  // A reader that goes away must give EPIPE, not SIGPIPE (roscpp ignores SIGPIPE; a host might not).
+  sigset_t pipe;
+  sigemptyset(&pipe);
+  sigaddset(&pipe, SIGPIPE);
+  pthread_sigmask(SIG_BLOCK, &pipe, nullptr);
+
+  State& s = *state_;
+  std::unique_lock<std::mutex> lock(s.mutex);
+  while (true) {
+    if (s.fd < 0 && !s.open_failed) {
+      const int fd = openNonBlocking(s.path);
+      const int err = errno;
+      if (fd >= 0) {
+        s.fd = fd;
+        ROS_INFO("[rover] verdict log %s: a reader opened it, writing", s.path.c_str());
+      } else if (err != ENXIO) {
+        s.open_failed = true;
+        ROS_ERROR("[rover] verdict log %s cannot be opened (%s): verdict rows are lost from now on",
+                  s.path.c_str(), std::strerror(err));
+      }
+    }
+    const bool waiting_for_reader = s.fd < 0 && !s.open_failed;
+    if (s.queue.empty() || waiting_for_reader) {
+      if (s.queue.empty()) s.drained.notify_all();
+      if (s.stop) return;
+      s.wake.wait_for(lock, std::chrono::milliseconds(kPollMs));
+      continue;
+    }
+    std::deque<std::string> batch;
+    batch.swap(s.queue);
+    s.in_flight = batch.size();
+    const int fd = s.fd;
+    const bool header = s.header_pending;
+    s.header_pending = false;
+    lock.unlock();
+
+    int err = 0;
+    size_t written = 0, failed = 0;
+    if (fd >= 0 && header) err = writeAll(fd, s.header, s.stop);
+    for (const std::string& row : batch) {
+      if (fd < 0 || err == EPIPE || err == ECANCELED) {
+        ++failed;  // open failed, the reader went away, or shutting down
+        continue;
+      }
+      const int e = writeAll(fd, row, s.stop);
+      if (e == 0) {
+        ++written;
+      } else {
+        ++failed;
+        err = e;
+      }
+    }
+
+    lock.lock();
+    s.in_flight = 0;
+    s.stats.written += written;
+    if (err == ECANCELED) {
+      s.in_flight = failed;  // stopped: the destructor reports them as not written
+      return;
+    }
+    s.stats.failed += failed;
+    if (failed > 0 && fd >= 0)
+      ROS_ERROR_THROTTLE(5.0, "[rover] verdict log %s: write failed (%s); %zu verdict rows lost so far",
+                         s.path.c_str(), std::strerror(err), s.stats.failed);
+    if (err == EPIPE) {
+      // The reader of a FIFO went away: wait for the next one.
+      ::close(s.fd);
+      s.fd = -1;
+      s.header_pending = true;
+    }
+  }
+}
+
+}  // namespace rover_loop_fusion
