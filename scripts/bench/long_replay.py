@@ -168,7 +168,7 @@ def main(argv=None):
         f"(bag {len(s.keyframes) * 0.5 / a.rate:.0f} s), node optimize_period {a.optimize_period:g} s",
         f"  verdicts: {len(rows)} of {n_cand} candidates ({n_cand - len(rows)} dropped); node "
         f"{'still running' if alive else 'EXITED'} after {wall:.0f} s",
-        f"  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
+        "  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
         f"  accepted: {tp} true, {fp} false (labels)",
         *(f"  {name} candidates: " + ", ".join(f"{k} {v}" for k, v in sorted(by_label[lab].items()))
           for name, lab in (("true", 1), ("false", 0))),

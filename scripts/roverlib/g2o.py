@@ -24,7 +24,7 @@ Outlier fraction p = outliers / (true + outliers).
 """
 import os
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List
 
 import numpy as np
 

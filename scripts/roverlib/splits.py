@@ -17,7 +17,7 @@ rows of agreeing look-alikes, a look-alike row before the first true loop, odome
 sigma 0.35, long laps (city scale) with the first loop after a long stretch, matches many laps
 old, and a scene without true loops (named so).
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 FAMILIES = ("poc", "real", "posegraph")
 SPLITS = ("tuning", "test")
