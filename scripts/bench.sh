@@ -1,26 +1,29 @@
 #!/usr/bin/env bash
 # One command per benchmark family (docs/results.md); builds the package and the Python venv
-# on first use, then runs the family's script with the venv's Python:
+# on first use, then runs the family's script (scripts/bench/) with the venv's Python:
 #
-#   ./scripts/bench.sh poc|real|posegraph|cost [--quick] [options of that script, --help]
-#   ./scripts/bench.sh all [--quick]          every family, one after the other
+#   ./scripts/bench.sh poc|real|posegraph [--split test|tuning] [--quick] [options, --help]
+#   ./scripts/bench.sh cost|long_replay [--quick] [options, --help]
+#   ./scripts/bench.sh all [--quick]          poc, real, posegraph, cost, one after the other
+#   ./scripts/bench.sh sweep ...              scripts/threshold_sweep.py (tuning cases only)
 #   ./scripts/bench.sh evaluate ...           scripts/evaluate.py (verdict log + labels -> AP, MR, ...)
 #   ./scripts/bench.sh diagnostics DIR        scripts/verdict_diagnostics.py (why decisions went wrong)
 #
-# Results (tables, CSV, PNG) go to results/<family>/ (git-ignored).
+# Cases come from roverlib/splits.py: the test split by default (what the docs report).
+# Results (tables, summary.csv, PNG) go to results/<family>/ (git-ignored).
 set -euo pipefail
 family="${1:-}"
 case "$family" in
-  poc|real|posegraph|cost|all|evaluate|diagnostics) shift ;;
-  *) echo "usage: $0 poc|real|posegraph|cost|all|evaluate|diagnostics [options]" >&2; exit 2 ;;
+  poc|real|posegraph|cost|long_replay|all|sweep|evaluate|diagnostics) shift ;;
+  *) echo "usage: $0 poc|real|posegraph|cost|long_replay|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
 esac
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 source "$ROVER_ROOT/scripts/venv.sh"
 cd "$ROVER_ROOT"
-if [ "$family" = evaluate ]; then exec "$ROVER_PYTHON" scripts/evaluate.py "$@"; fi
-if [ "$family" = diagnostics ]; then exec "$ROVER_PYTHON" scripts/verdict_diagnostics.py "$@"; fi
-if [ "$family" = all ]; then
-  for f in poc real posegraph cost; do "$ROVER_PYTHON" "scripts/bench_$f.py" "$@"; done
-  exit 0
-fi
-exec "$ROVER_PYTHON" "scripts/bench_$family.py" "$@"
+case "$family" in
+  evaluate) exec "$ROVER_PYTHON" scripts/evaluate.py "$@" ;;
+  diagnostics) exec "$ROVER_PYTHON" scripts/verdict_diagnostics.py "$@" ;;
+  sweep) exec "$ROVER_PYTHON" scripts/threshold_sweep.py "$@" ;;
+  all) for f in poc real posegraph cost; do "$ROVER_PYTHON" "scripts/bench/$f.py" "$@"; done ;;
+  *) exec "$ROVER_PYTHON" "scripts/bench/$family.py" "$@" ;;
+esac

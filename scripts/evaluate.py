@@ -26,8 +26,6 @@ import json
 import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 from roverlib import bench, metrics  # noqa: E402
 

@@ -24,7 +24,6 @@ import sys
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
 
 import simulate  # noqa: E402
 from roverlib import bag, geometry as g, scenario, scenes  # noqa: E402

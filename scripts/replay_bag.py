@@ -18,7 +18,6 @@ Run with /usr/bin/python3 after sourcing the workspace (roslaunch does both)."""
 import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import rospy  # noqa: E402
 

@@ -10,7 +10,6 @@ import argparse
 import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from roverlib import bag, scenario  # noqa: E402
 

@@ -7,9 +7,11 @@ gate "reject if innovation > A + B * path_length" would have done to the accepte
 the average precision of the score next to alternatives computed from the same verdicts
 (score / path length, innovation).
 
-  ./scripts/bench.sh diagnostics results/posegraph [--gate 1.0,0.05] [--protocol sequential]
+  ./scripts/bench.sh diagnostics results/posegraph [--gate 1.0,0.05] [--run rover]
 
-Runs are matched to their scenario by name (runs/<scenario>[_<protocol>])."""
+A family's folder holds scenarios/<case>/ and runs/<case>/<run>/verdicts.csv (roverlib/methods.py:
+"rover" is the product's sequential run; the PoC and real families also have "oracle" and
+"none")."""
 import argparse
 import glob
 import os
@@ -17,10 +19,7 @@ import sys
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-
-from roverlib import bench, metrics  # noqa: E402
+from roverlib import bench, metrics
 
 COLUMNS = [("run", "run", ""), ("fp", "FP", "d"), ("fp_span", "FP span med", ".0f"), ("fp_score", "FP score med", ".2f"),
            ("fp_innovation", "FP innov med", ".2f"), ("fp_score_per_innovation", "FP score/innov", ".3f"),
@@ -28,15 +27,6 @@ COLUMNS = [("run", "run", ""), ("fp", "FP", "d"), ("fp_span", "FP span med", ".0
            ("gate_fp", "gate: FP left", "d"), ("gate_tp", "gate: TP left", "d"),
            ("ap_score", "AP score", ".3f"), ("ap_score_per_path", "AP score/path", ".3f"),
            ("ap_innovation", "AP innov", ".3f")]
-
-
-def scenario_of(family, run):
-    names = sorted((os.path.basename(d) for d in glob.glob(os.path.join(family, "scenarios", "*"))), key=len,
-                   reverse=True)
-    for n in names:
-        if run == n or run.startswith(n + "_"):
-            return os.path.join(family, "scenarios", n)
-    return None
 
 
 def med(values):
@@ -47,15 +37,14 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("family", help="a results folder with runs/ and scenarios/ (e.g. results/posegraph)")
     ap.add_argument("--gate", default="1.0,0.05", help="A,B of the counterfactual innovation gate [m, m/m]")
-    ap.add_argument("--protocol", default="sequential", help="only runs whose name ends in _PROTOCOL "
-                    "(ignored when runs carry no protocol suffix)")
+    ap.add_argument("--run", default="rover", help="which run of each case (rover, oracle, none)")
     a = ap.parse_args(argv)
     ga, gb = (float(x) for x in a.gate.split(","))
     rows = []
-    for run in sorted(glob.glob(os.path.join(a.family, "runs", "*"))):
-        name = os.path.basename(run)
-        scn = scenario_of(a.family, name)
-        if scn is None or (name != os.path.basename(scn) and not name.endswith("_" + a.protocol)):
+    for run in sorted(glob.glob(os.path.join(a.family, "runs", "*", a.run))):
+        name = os.path.basename(os.path.dirname(run))
+        scn = os.path.join(a.family, "scenarios", name)
+        if not os.path.exists(os.path.join(run, "verdicts.csv")) or not os.path.isdir(scn):
             continue
         j = bench.labelled(run, os.path.join(scn, "candidates.csv"))
         r = {"run": name}

@@ -1,14 +1,17 @@
-"""Shared plumbing of the benchmark scripts: running rover_replay, evaluating its output
-directory, printing tables and writing CSV."""
+"""Shared plumbing of the benchmark scripts: the command line every family shares, running
+rover_replay, evaluating its output directory, time-limited baselines, printing tables and
+writing CSV, and the one machine-readable summary per family (results/<family>/summary.csv)."""
+import collections
 import csv
 import glob
 import os
 import subprocess
 import sys
+import time
 
 from . import metrics
 
-ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+ROOT = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", ".."))  # the clone, not .ws/src
 TOOLS = os.path.join(os.environ.get("ROVER_WS", os.path.join(ROOT, ".ws")), "devel", "lib", "rover_loop_fusion")
 RESULTS = os.path.join(ROOT, "results")
 # rover_replay flags that switch the innovation gate off: the scoring protocols (oracle, none)
@@ -17,18 +20,110 @@ GATE_OFF = ["--max_innovation", 0, "--max_innovation_per_metre", 0]
 DECISION_KEYS = ("threshold", "max_innovation", "max_innovation_per_metre")
 
 
+# results/<family>/summary.csv: one row per case x method. Other tools read it: keep the names.
+SUMMARY_COLUMNS = ("family", "split", "case", "method", "tp", "fp", "fn", "precision", "recall", "ate",
+                   "ate_true_only", "tate", "verify_ms_p50", "verify_ms_p99")
+
+
+def family_arguments(ap, family, jobs=True):
+    """The options every family shares (README/docs: `./scripts/bench.sh FAMILY --help`)."""
+    ap.add_argument("--split", choices=("test", "tuning"), default="test",
+                    help="which cases (roverlib/splits.py): the docs report test; choose defaults on tuning")
+    ap.add_argument("--quick", action="store_true", help="the CI subset of the split")
+    ap.add_argument("--cases", help="only these case names (comma-separated)")
+    ap.add_argument("--out", default=os.path.join(RESULTS, family))
+    ap.add_argument("--time-limit", type=float, default=600.0,
+                    help="seconds per baseline (GNC, DCS, PCM, IPC) and case; a run that hits it is reported")
+    if jobs:
+        ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
+
+
+def select_cases(family, a):
+    """The cases of the family's --split (--quick: its CI subset, with 40 + 40 candidates where
+    the family draws candidates), filtered by --cases."""
+    import dataclasses
+    from . import splits
+    chosen = splits.cases(family, a.split, a.quick)
+    if a.quick and family in ("poc", "real"):
+        chosen = [dataclasses.replace(c, args=tuple(sorted({**c.kwargs, "n_true": 40, "n_false": 40}.items())))
+                  for c in chosen]
+    if a.cases:
+        names = set(a.cases.split(","))
+        chosen = [c for c in chosen if c.name in names]
+        if not chosen:
+            sys.exit(f"no {a.split} case of {family} is named {a.cases}")
+    return chosen
+
+
+def run_limited(fn, args=(), limit_s=600.0):
+    """fn(*args) in a forked child, killed after limit_s seconds: (result or None, seconds,
+    limit hit). For the batch baselines, whose solvers cannot be stopped from outside."""
+    import multiprocessing as mp
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+
+    def child():
+        try:
+            send.send(("ok", fn(*args)))
+        except Exception as e:  # reported by the parent
+            send.send(("error", repr(e)))
+
+    t0 = time.perf_counter()
+    p = ctx.Process(target=child)
+    p.start()
+    send.close()
+    got = recv.poll(limit_s)
+    if not got:
+        p.kill()
+        p.join()
+        return None, time.perf_counter() - t0, True
+    status, value = recv.recv()
+    p.join()
+    if status != "ok":
+        raise RuntimeError(f"{getattr(fn, '__name__', fn)} failed: {value}")
+    return value, time.perf_counter() - t0, False
+
+
+def reason_counts(reasons):
+    """'accepted 40, innovation_above_bound 58, ...' (most frequent first)."""
+    return ", ".join(f"{k} {v}" for k, v in collections.Counter(reasons).most_common())
+
+
+def percentile(values, q):
+    """The q-th percentile (numpy's linear interpolation) of the finite values; NaN if none."""
+    import numpy as np
+    v = np.asarray([x for x in values if x == x], dtype=float)
+    return float(np.percentile(v, q)) if v.size else float("nan")
+
+
+def write_summary(rows, path):
+    """results/<family>/summary.csv with exactly SUMMARY_COLUMNS (NaN written empty)."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(SUMMARY_COLUMNS)
+        for r in rows:
+            w.writerow(["" if (isinstance(r.get(k), float) and r[k] != r[k]) or r.get(k) is None else
+                        (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in SUMMARY_COLUMNS])
+
+
 def defaults(environment):
     """The decision parameters of config/rover_<environment>.yaml (indoor, outdoor) as a dict,
-    so that the benchmarks decide exactly as the shipped configuration does."""
+    for tables and titles (the runs themselves read the whole file: shipped())."""
     import yaml
-    with open(os.path.join(ROOT, "config", f"rover_{environment}.yaml")) as f:
+    with open(config_path(environment)) as f:
         c = yaml.safe_load(f)
     return {k: float(c[k]) for k in DECISION_KEYS}
 
 
-def decision_args(params):
-    """rover_replay flags for a dict from defaults()."""
-    return [x for k in DECISION_KEYS for x in (f"--{k}", params[k])]
+def config_path(environment):
+    return os.path.join(ROOT, "config", f"rover_{environment}.yaml")
+
+
+def shipped(environment, *overrides):
+    """rover_replay flags that run the shipped configuration of `environment` (every parameter
+    of config/rover_<environment>.yaml), then `overrides` (flags after --config win)."""
+    return ["--config", config_path(environment)] + list(overrides)
 
 
 def tool(name):
@@ -80,8 +175,9 @@ def trajectory_errors(run_dir, align="se3", names=("odometry", "loop_fusion_acce
 
 
 def fmt(v, spec):
+    """A table cell: NaN (undefined: precision of no decision, a metric a method has not) is "-"."""
     if isinstance(v, float):
-        return "nan" if v != v else format(v, spec)
+        return "-" if v != v else format(v, spec)
     return str(v)
 
 
@@ -100,13 +196,20 @@ def print_table(rows, columns, title=None, file=None):
 
 
 def report(rows, columns, title, out_dir, csv_name, notes=()):
-    """What every family ends with: the table on stdout, rows as CSV, summary.md (title, notes
-    as a list, the table) in out_dir."""
-    print_table(rows, columns, title)
+    """What a one-table family ends with: the table on stdout, rows as CSV, summary.md (title,
+    notes as a list, the table) in out_dir."""
     write_csv(rows, os.path.join(out_dir, csv_name))
+    report_tables([(title, rows, columns)], out_dir, notes)
+
+
+def report_tables(sections, out_dir, notes=()):
+    """Several tables [(title, rows, columns)]: printed, and written to out_dir/summary.md."""
     with open(os.path.join(out_dir, "summary.md"), "w") as f:
-        f.write(title + "\n\n" + "".join(f"- {n}\n" for n in notes) + ("\n" if notes else "") +
-                markdown_table(rows, columns))
+        f.write("".join(f"- {n}\n" for n in notes) + ("\n" if notes else ""))
+        for title, rows, columns in sections:
+            print_table(rows, columns, title)
+            print()
+            f.write(f"### {title}\n\n" + markdown_table(rows, columns) + "\n")
 
 
 def markdown_table(rows, columns):

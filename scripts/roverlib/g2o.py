@@ -14,12 +14,17 @@ vertices whose true relative pose differs from it by at least `min_error` metres
   grouped     groups of 10 consecutive pairs (q0+k, m0+k) that agree with each other and with
               the odometry (one wrong alignment of two stretches: a consistent false revisit);
   repetitive  a small relative pose between places 3 .. 15 m apart in truth, facing the same
-              way within 30 deg (a look-alike place: the case this project exists for).
+              way within 30 deg (a look-alike place: the case this project exists for);
+  near        near look-alikes in rows: the relative pose PnP returns at a look-alike 1 .. 3 m
+              from the query's true place (2D: sideways or along the road; 3D: on the floor
+              above or below, 1 .. 3.5 m), for ROW_SIZE consecutive queries at one offset (they
+              agree with each other and with the odometry), the first row before the first
+              true loop.
 Outlier fraction p = outliers / (true + outliers).
 """
 import os
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List
 
 import numpy as np
 
@@ -27,8 +32,10 @@ from . import geometry as g
 from . import real_data
 from .scenario import Candidate, Keyframe, Scenario
 
-OUTLIER_KINDS = ("random", "local", "grouped", "repetitive")
+OUTLIER_KINDS = ("random", "local", "grouped", "repetitive", "near")
 GROUP_SIZE = 10
+ROW_SIZE = 5
+NEAR_RADIUS = 1.0  # m: a look-alike's match is this close to the look-alike place
 
 # name -> g2o file under ../shared/data (ground truth: groundtruth())
 GRAPHS = {
@@ -195,10 +202,12 @@ def _plausible_pose(rng, dim, step, sigma_t=1.0, sigma_yaw_deg=10.0):
     return g.pose(R, t)
 
 
-def inject_outliers(graph, n_true, kind, fraction, places, seed=0, min_error=1.5, distance=(3.0, 15.0)):
+def inject_outliers(graph, n_true, kind, fraction, places, seed=0, min_error=1.5, distance=(3.0, 15.0),
+                    first_true_query=None):
     """Outlier edges (list of Edge, a = match, b = query) of one kind. `places`: 4x4 truth (or
     reference) poses of the vertices, used to make sure every outlier is wrong by at least
-    `min_error` metres and to find look-alike places for `repetitive`. The count is
+    `min_error` metres (`near`: 1 m) and to find look-alike places for `repetitive` and `near`
+    (whose first row ends before `first_true_query`). The count is
     round(n_true * fraction / (1 - fraction))."""
     if kind not in OUTLIER_KINDS:
         raise ValueError(f"unknown outlier kind {kind}")
@@ -224,6 +233,8 @@ def inject_outliers(graph, n_true, kind, fraction, places, seed=0, min_error=1.5
         taken.add((m, q))
         out.append(Edge(m, q, T, info.copy()))
 
+    if kind == "near":
+        min_error = min(min_error, 0.9)
     tries = 0
     while len(out) < count and tries < 200 * max(count, 1):
         tries += 1
@@ -241,6 +252,22 @@ def inject_outliers(graph, n_true, kind, fraction, places, seed=0, min_error=1.5
             if ok.size == 0:
                 continue
             m = int(rng.choice(ok))
+        elif kind == "near":
+            size = min(ROW_SIZE, count - len(out))
+            # the first row before the first true loop, while such a row can be found
+            first = not out and first_true_query is not None and tries < 50 * max(count, 1)
+            hi = (first_true_query - size) if first else n - size
+            if hi <= 10:
+                continue
+            row = _near_row(rng, P, Y, int(rng.integers(10, hi)), size, graph.dim)
+            if row is None or any((m, q) in taken for m, q, _ in row):
+                continue
+            group = [(m, q, g.relative(places[m], g.pose(places[q][:3, :3], places[q][:3, 3] + w))) for m, q, w in row]
+            if not all(wrong_enough(m, q, T) for m, q, T in group):
+                continue
+            for m, q, T in group:
+                add(m, q, T)
+            continue
         else:  # grouped
             size = min(GROUP_SIZE, count - len(out))
             q0 = int(rng.integers(10, n - size))
@@ -269,14 +296,47 @@ def inject_outliers(graph, n_true, kind, fraction, places, seed=0, min_error=1.5
     return out
 
 
+def _near_row(rng, P, Y, q0, size, dim):
+    """[(match, query, offset)] for queries q0 .. q0+size-1: one offset w (from q0 to an older
+    place 1-3 m away, 2D; on another floor, 3D) and, for each query, the older vertex nearest to
+    its place + w (within NEAR_RADIUS, facing the same way); None if a query has none."""
+    older = np.arange(0, q0 - 9)
+    v = P[older] - P[q0]
+    same_way = np.abs(g.wrap(Y[older] - Y[q0])) < np.radians(30.0)
+    if dim == 2:
+        ok = same_way & (np.linalg.norm(v, axis=1) >= 1.0) & (np.linalg.norm(v, axis=1) <= 3.0)
+    else:
+        ok = same_way & (np.linalg.norm(v[:, :2], axis=1) <= NEAR_RADIUS) & (np.abs(v[:, 2]) >= 1.0) & \
+            (np.abs(v[:, 2]) <= 3.5)
+    if not ok.any():
+        return None
+    w = v[int(rng.choice(np.flatnonzero(ok)))]
+    row = []
+    for q in range(q0, q0 + size):
+        older = np.arange(0, q - 9)
+        d = np.linalg.norm(P[older] - (P[q] + w), axis=1)
+        d[np.abs(g.wrap(Y[older] - Y[q])) >= np.radians(30.0)] = np.inf
+        k = int(np.argmin(d))
+        if d[k] > NEAR_RADIUS:
+            return None
+        row.append((int(older[k]), q, w))
+    return row
+
+
+def ordered_candidates(true_loops, outliers, seed=0):
+    """[(Edge, label)] in verification order: by query vertex, random order within one query
+    (fixed seed); the order of to_scenario's candidates and of every method."""
+    both = [(e, 1) for e in true_loops] + [(e, 0) for e in outliers]
+    order = np.random.default_rng(seed).permutation(len(both))
+    return sorted((both[i] for i in order), key=lambda x: x[0].query)
+
+
 def to_scenario(graph, true_loops, outliers, truth=None, seed=0, meta=None):
     """A Scenario: keyframes = odometry chain (stamp = vertex id), candidates = true loops
     (label 1) + outliers (label 0) sorted by query vertex (random order within one query)."""
     kfs = [Keyframe(i, float(i), 1, T) for i, T in enumerate(graph.odometry_poses())]
-    cands = [Candidate(e.query, e.match, e.T_rel, 1, 40, "loop") for e in true_loops] + \
-            [Candidate(e.query, e.match, e.T_rel, 0, 40, "outlier") for e in outliers]
-    order = np.random.default_rng(seed).permutation(len(cands))
-    cands = sorted((cands[i] for i in order), key=lambda c: c.query)
+    cands = [Candidate(e.query, e.match, e.T_rel, label, 40, "loop" if label else "outlier")
+             for e, label in ordered_candidates(true_loops, outliers, seed)]
     m = {"source": GRAPHS.get(graph.name, graph.name), "mode": "4dof" if graph.dim == 2 else "6dof",
          "true_candidates": len(true_loops), "false_candidates": len(outliers)}
     m.update(meta or {})

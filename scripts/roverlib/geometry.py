@@ -77,3 +77,9 @@ def yaw_of(R):
 
 def wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def yaw_only(T):
+    """The pose with its rotation reduced to the yaw (ZYX): loop_fusion's 4-DoF view of a pose
+    whose roll and pitch the VIO keeps."""
+    return pose(rot_z(yaw_of(T[:3, :3])), T[:3, 3])

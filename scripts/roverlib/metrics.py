@@ -108,15 +108,18 @@ def ranking_metrics(label, score):
 
 
 def decision_metrics(label, accepted):
-    """TP/FP/TN/FN, precision and recall of the verifier's own accept/reject decisions
-    (precision is 1.0 when nothing was accepted)."""
-    from sklearn.metrics import confusion_matrix, precision_score, recall_score
+    """TP/FP/TN/FN, precision and recall of accept/reject decisions. Precision is NaN (shown
+    as "-") when nothing was accepted, recall NaN when there is no true loop: no decision is no
+    evidence, and a table must not read 1.0 there."""
     label = np.asarray(label, dtype=int)
-    accepted = np.asarray(accepted, dtype=int)
-    tn, fp, fn, tp = confusion_matrix(label, accepted, labels=[0, 1]).ravel()
-    return {"tp": int(tp), "fp": int(fp), "tn": int(tn), "fn": int(fn),
-            "precision": float(precision_score(label, accepted, zero_division=1.0)),
-            "recall": float(recall_score(label, accepted, zero_division=0.0)) if label.any() else float("nan")}
+    accepted = np.asarray(accepted, dtype=bool)
+    tp = int(np.sum(accepted & (label == 1)))
+    fp = int(np.sum(accepted & (label == 0)))
+    fn = int(np.sum(~accepted & (label == 1)))
+    tn = int(np.sum(~accepted & (label == 0)))
+    return {"tp": tp, "fp": fp, "tn": tn, "fn": fn,
+            "precision": tp / (tp + fp) if tp + fp else float("nan"),
+            "recall": tp / (tp + fn) if tp + fn else float("nan")}
 
 
 def _pr_axes(ax, curves, title):

@@ -14,7 +14,7 @@ from .scenario import Candidate, Keyframe, Scenario
 from .scenes import perturb, small_pose
 
 DATA = os.environ.get("ROVER_SHARED_DATA",
-                      os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data"))
+                      os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "..", "shared", "data"))
 
 # name -> (estimate file, ground-truth file, mode, alignment, environment)
 SEQUENCES = {
@@ -73,8 +73,35 @@ def keyframes_by_distance(poses, min_distance, min_yaw=np.radians(15.0)):
     return keep
 
 
+LOOKALIKE_DIRECTIONS = ("lateral", "vertical", "along")
+
+
+def lookalike_twins(offset, first="lateral"):
+    """Twins of a real place for hard false candidates: the query's pose moved `offset` metres
+    sideways (a parallel aisle), vertically (the floor below or above) or along its heading (the
+    next identical bay); the first direction that has a keyframe there wins, starting at `first`."""
+    k = LOOKALIKE_DIRECTIONS.index(first)
+    order = LOOKALIKE_DIRECTIONS[k:] + LOOKALIKE_DIRECTIONS[:k]
+    shifts = {"lateral": [(0.0, offset, 0.0), (0.0, -offset, 0.0)], "vertical": [(0.0, 0.0, -offset), (0.0, 0.0, offset)],
+              "along": [(offset, 0.0, 0.0), (-offset, 0.0, 0.0)]}
+
+    def twins(T):
+        out = []
+        for d in order:
+            for dx, dy, dz in shifts[d]:
+                Q = T.copy()
+                Q[:3, 3] += g.rot_z(g.yaw_of(T[:3, :3])) @ np.array([dx, dy, 0.0]) + np.array([0.0, 0.0, dz])
+                out.append(Q)
+        return out
+    return twins
+
+
 def make_real(name, seed=0, n_true=100, n_false=100, keyframe_distance=None, min_gap_s=None,
-              revisit_radius=None, false_distance=None):
+              revisit_radius=None, false_distance=None, lookalike=None):
+    """A Scenario from a real VIO/VO run. False candidates: by default pairs of places
+    `false_distance` apart in truth with a small relative pose; with lookalike = dict(offset=M,
+    first="lateral"|"vertical"|"along", rows=N, early=bool) look-alikes `offset` metres from the
+    query instead (roverlib.scenes: in rows of N agreeing ones, a row before the first true loop)."""
     est_rel, gt_rel, mode, alignment, env = SEQUENCES[name]
     rng = np.random.default_rng(seed)
     outdoor = env == "outdoor"
@@ -98,12 +125,31 @@ def make_real(name, seed=0, n_true=100, n_false=100, keyframe_distance=None, min
     keep = [valid[k] for k in keyframes_by_distance(est_v, keyframe_distance)]
     kfs = [Keyframe(k, float(t_est[i]), 1, est[i]) for k, i in enumerate(keep)]
     truth = [gt[match[i]] for i in keep]
+    stamps = np.array([k.stamp for k in kfs])
+    meta = {"source": f"{est_rel} + {gt_rel}", "mode": mode, "alignment": alignment,
+            "environment": env, "seed": seed, "keyframe_distance": keyframe_distance}
+    if lookalike:
+        from .scenes import candidate_pools, select_candidates
+        lk = dict(offset=1.5, first="lateral", rows=5, early=True)
+        lk.update(lookalike)
+        pools = candidate_pools(truth, lookalike_twins(lk["offset"], lk["first"]), rng, min_gap=1,
+                                radius=revisit_radius, yaw_tol=np.radians(30.0),
+                                min_false_distance=0.5 * lk["offset"],
+                                older=lambda q: np.flatnonzero(stamps < stamps[q] - min_gap_s))
+        chosen = select_candidates(*pools, rng, n_true, n_false, lk["rows"], lk["early"])[0]
+        meta.update(lookalike_offset=lk["offset"], lookalike_first=lk["first"], rows=lk["rows"])
+    else:
+        chosen = _far_apart_candidates(truth, stamps, rng, n_true, n_false, min_gap_s, revisit_radius,
+                                       false_distance)
+    meta.update(true_candidates=sum(c.label == 1 for c in chosen), false_candidates=sum(c.label == 0 for c in chosen))
+    return Scenario(name, kfs, sorted(chosen, key=lambda c: c.query), truth, meta)
 
+
+def _far_apart_candidates(truth, stamps, rng, n_true, n_false, min_gap_s, revisit_radius, false_distance):
     P = np.array([T[:3, 3] for T in truth])
     Y = np.array([g.yaw_of(T[:3, :3]) for T in truth])
-    stamps = np.array([k.stamp for k in kfs])
     true_pool, false_pool = [], []
-    for q in range(len(kfs)):
+    for q in range(len(truth)):
         older = np.flatnonzero(stamps < stamps[q] - min_gap_s)
         if older.size == 0:
             continue
@@ -128,8 +174,4 @@ def make_real(name, seed=0, n_true=100, n_false=100, keyframe_distance=None, min
                 used.add(pool[i].query)
                 chosen.append(pool[i])
                 got += 1
-    meta = {"source": f"{est_rel} + {gt_rel}", "mode": mode, "alignment": alignment,
-            "environment": env, "seed": seed, "keyframe_distance": keyframe_distance,
-            "true_candidates": sum(c.label == 1 for c in chosen),
-            "false_candidates": sum(c.label == 0 for c in chosen)}
-    return Scenario(name, kfs, sorted(chosen, key=lambda c: c.query), truth, meta)
+    return chosen

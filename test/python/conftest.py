@@ -1,8 +1,19 @@
+import importlib.util
 import os
 import sys
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
-sys.path.insert(0, os.path.join(ROOT, "scripts"))
+
+
+def script(relpath):
+    """A script under scripts/ (e.g. "bench/poc.py") loaded as a module, to call its main():
+    scripts are programs, not a package; roverlib is the importable package (setup.py)."""
+    path = os.path.join(ROOT, "scripts", relpath)
+    spec = importlib.util.spec_from_file_location("script_" + relpath[:-3].replace("/", "_"), path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # so that worker processes (fork) find its functions by name
+    spec.loader.exec_module(module)
+    return module
 
 
 def devel_tool(name):

@@ -3,8 +3,10 @@
 mark in a label file is not an error."""
 import pytest
 
-import evaluate
+from conftest import script
 from roverlib import scenario
+
+evaluate = script("evaluate.py")
 
 HEADER = ("query_stamp,match_stamp,query_index,match_index,accepted,reason,score,threshold,converged,"
           "iterations,window_size,solve_ms,elapsed_ms,inliers,innovation,path_length,verifier,detail")

@@ -7,10 +7,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import built_tool
-from roverlib import metrics, scenario, scenes
+from conftest import built_tool, script
+from roverlib import bench, metrics, scenario, scenes
 
-import evaluate
+evaluate = script("evaluate.py")
 
 HEADER = ("query_stamp,match_stamp,query_index,match_index,accepted,reason,score,threshold,converged,"
           "iterations,window_size,solve_ms,elapsed_ms,inliers,innovation,path_length,verifier,detail")
@@ -75,9 +75,13 @@ def test_unscored_verdicts_rank_last_and_labels_join(tmp_path):
     assert d["precision"] == 0.5 and d["recall"] == 0.5
 
 
-def test_decisions_without_acceptance_have_precision_one():
+def test_precision_of_no_decision_is_undefined_not_one():
     d = metrics.decision_metrics([1, 0, 1], [False, False, False])
-    assert d["precision"] == 1.0 and d["recall"] == 0.0 and d["fn"] == 2
+    assert math.isnan(d["precision"]) and d["recall"] == 0.0 and d["fn"] == 2
+    d = metrics.decision_metrics([0, 0], [True, False])  # no true loop: recall undefined
+    assert d["precision"] == 0.0 and math.isnan(d["recall"]) and d["fp"] == 1
+    # a table shows both as "-"
+    assert bench.fmt(d["recall"], ".2f") == "-" and bench.fmt(0.5, ".2f") == "0.50"
 
 
 def _square(n=80, side=10.0):

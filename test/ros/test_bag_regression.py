@@ -13,7 +13,6 @@ import csv
 import math
 import os
 import subprocess
-import sys
 import tempfile
 import unittest
 
@@ -23,7 +22,6 @@ import yaml
 
 PKG = "rover_loop_fusion"
 ROOT = rospkg.RosPack().get_path(PKG)
-sys.path.insert(0, os.path.join(ROOT, "scripts"))
 
 from roverlib import bag_replay  # noqa: E402
 

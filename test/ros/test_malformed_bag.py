@@ -7,7 +7,6 @@ a candidate recorded before its keyframe, keyframes named by number) and gives e
 verdict per candidate: the one expected.csv lists, with a ROS_WARN for every refused
 keyframe and every invalid_input verdict; regular candidates in between are still verified."""
 import os
-import sys
 import threading
 import time
 import unittest
@@ -18,7 +17,6 @@ from rosgraph_msgs.msg import Log
 
 PKG = "rover_loop_fusion"
 ROOT = rospkg.RosPack().get_path(PKG)
-sys.path.insert(0, os.path.join(ROOT, "scripts"))
 
 from roverlib import bag as rbag  # noqa: E402
 from roverlib import bag_replay  # noqa: E402

@@ -4,7 +4,7 @@ Reports whether every candidate got a verdict (none dropped), the node's memory 
 and the distribution of verification latency. A benchmark, not a test: it prints figures and
 writes results/long_replay/ (summary.txt, rss.csv, verdicts.csv).
 
-  bench_long_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 200]
+  scripts/bench/long_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 200]
                        [--sigma 0.03] [--seed 3] [--optimize-period 0] [--out results/long_replay]
 
 The scene is the corridor loop (120 keyframes a lap, odometry noise --sigma: 0.03 is a good
@@ -24,12 +24,8 @@ import subprocess
 import sys
 import time
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, HERE)
-ROOT = os.path.dirname(HERE)
-
-from roverlib import bag as rbag  # noqa: E402
-from roverlib import scenario, scenes  # noqa: E402
+from roverlib import bag as rbag
+from roverlib import bench, scenario, scenes
 
 
 def free_port():
@@ -74,7 +70,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--optimize-period", type=float, default=0.0,
                     help="node's loop_fusion-like optimisation period [s]; 0: only at the end")
-    ap.add_argument("--out", default=os.path.join(ROOT, "results", "long_replay"))
+    ap.add_argument("--out", default=os.path.join(bench.RESULTS, "long_replay"))
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     scn_dir = os.path.join(a.out, "scenario")
@@ -104,7 +100,7 @@ def main(argv=None):
                                 stderr=subprocess.DEVNULL, start_new_session=True)
         procs.append(core)
         time.sleep(3)
-        subprocess.run(["rosparam", "load", os.path.join(ROOT, "config", "rover_indoor.yaml"),
+        subprocess.run(["rosparam", "load", os.path.join(bench.ROOT, "config", "rover_indoor.yaml"),
                         "/rover_verifier/rover"], env=env, check=True)
         node = subprocess.Popen(
             ["rosrun", "rover_loop_fusion", "rover_verifier_node", "__name:=rover_verifier",
@@ -172,7 +168,7 @@ def main(argv=None):
         f"(bag {len(s.keyframes) * 0.5 / a.rate:.0f} s), node optimize_period {a.optimize_period:g} s",
         f"  verdicts: {len(rows)} of {n_cand} candidates ({n_cand - len(rows)} dropped); node "
         f"{'still running' if alive else 'EXITED'} after {wall:.0f} s",
-        f"  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
+        "  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
         f"  accepted: {tp} true, {fp} false (labels)",
         *(f"  {name} candidates: " + ", ".join(f"{k} {v}" for k, v in sorted(by_label[lab].items()))
           for name, lab in (("true", 1), ("false", 0))),
