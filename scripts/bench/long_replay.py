@@ -6,6 +6,7 @@ writes results/long_replay/ (summary.txt, rss.csv, verdicts.csv).
 
   scripts/bench/long_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 200]
                        [--sigma 0.03] [--seed 3] [--optimize-period 0] [--out results/long_replay]
+                       [--config config/rover_indoor.yaml] [--set decision=chi2 ...]
 
 The scene is the corridor loop (120 keyframes a lap, odometry noise --sigma: 0.03 is a good
 VIO, whose first loop is accepted; at 0.05 some seeds lose it, docs/method.md) driven
@@ -71,7 +72,14 @@ def main(argv=None):
     ap.add_argument("--optimize-period", type=float, default=0.0,
                     help="node's loop_fusion-like optimisation period [s]; 0: only at the end")
     ap.add_argument("--out", default=os.path.join(bench.RESULTS, "long_replay"))
+    ap.add_argument("--config", default=bench.config_path("indoor"),
+                    help="verifier YAML loaded into the node's verifier namespace")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a verifier parameter set after --config (e.g. decision=chi2); repeatable")
     a = ap.parse_args(argv)
+    for o in a.overrides:
+        if "=" not in o:
+            ap.error(f"--set {o}: expected KEY=VALUE")
     os.makedirs(a.out, exist_ok=True)
     scn_dir = os.path.join(a.out, "scenario")
     log = os.path.join(a.out, "verdicts.csv")
@@ -100,8 +108,10 @@ def main(argv=None):
                                 stderr=subprocess.DEVNULL, start_new_session=True)
         procs.append(core)
         time.sleep(3)
-        subprocess.run(["rosparam", "load", os.path.join(bench.ROOT, "config", "rover_indoor.yaml"),
-                        "/rover_verifier/rover"], env=env, check=True)
+        subprocess.run(["rosparam", "load", a.config, "/rover_verifier/rover"], env=env, check=True)
+        for o in a.overrides:
+            key, value = o.split("=", 1)
+            subprocess.run(["rosparam", "set", f"/rover_verifier/rover/{key}", value], env=env, check=True)
         node = subprocess.Popen(
             ["rosrun", "rover_loop_fusion", "rover_verifier_node", "__name:=rover_verifier",
              f"_verdict_log:={log}", f"_optimize_period:={a.optimize_period}", "_publish_markers:=false"],
@@ -143,6 +153,7 @@ def main(argv=None):
                 os.killpg(p.pid, signal.SIGKILL)
 
     rows = list(csv.DictReader(open(log))) if os.path.exists(log) else []
+    rows = [r for r in rows if r.get("final", "1") != "0"]  # a held candidate's deferred verdict
     lat = [float(r["elapsed_ms"]) for r in rows]
     reasons = {}
     for r in rows:
@@ -166,6 +177,7 @@ def main(argv=None):
     lines = [
         f"long replay: corridor sigma {a.sigma:g} seed {a.seed}, {len(s.keyframes)} keyframes, {n_cand} candidates, rosbag play -r {a.rate:g} "
         f"(bag {len(s.keyframes) * 0.5 / a.rate:.0f} s), node optimize_period {a.optimize_period:g} s",
+        f"  verifier: {os.path.relpath(a.config, bench.ROOT)}" + "".join(f", {o}" for o in a.overrides),
         f"  verdicts: {len(rows)} of {n_cand} candidates ({n_cand - len(rows)} dropped); node "
         f"{'still running' if alive else 'EXITED'} after {wall:.0f} s",
         "  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),
