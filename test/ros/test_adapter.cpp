@@ -1038,9 +1038,10 @@ TEST_F(Adapter, AReleasedFirstLoopOfAnEarlierSessionShiftsThatSessionOnly) {
     kf.vio_R_w_i = turned;
     if (i == 25) script->decide(core::LoopDecision::Kind::kRelease, 15, 5);
     if (i == 15) {
-      // findConnection: keyframe 15 is where keyframe 5 is, facing the same way
-      const Eigen::Quaterniond q(turned.transpose());
-      const Detection d{5, (LoopInfo() << 0, 0, 0, q.w(), q.x(), q.y(), q.z(), -40.0).finished(), 30};
+      // findConnection: keyframe 15 is where keyframe 5 is, turned by the same 40 degrees as in
+      // its VIO frame: session 1's frame is the map's shifted by (0, 7, 0), no rotation
+      const Eigen::Quaterniond q(turned);
+      const Detection d{5, (LoopInfo() << 0, 0, 0, q.w(), q.x(), q.y(), q.z(), 40.0).finished(), 30};
       EXPECT_FALSE(pg.addKeyFrame(kf, &d).has_loop);
     } else {
       pg.addKeyFrame(kf, nullptr);
