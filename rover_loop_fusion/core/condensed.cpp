@@ -13,11 +13,18 @@ namespace core {
 
 namespace {
 
-Eigen::Matrix3d yawGenerator() {
-  Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
-  E(0, 1) = -1.0;
-  E(1, 0) = 1.0;
-  return E;
+/// The edge's blocks J_u^T J_v of the Gauss-Newton Hessian at the columns c[0], c[1] (-1: a
+/// state that is not solved for).
+void addHessianBlocks(const Eigen::Matrix4d* const J[2], const int c[2], std::vector<Eigen::Triplet<double>>* trip) {
+  for (int u = 0; u < 2; ++u) {
+    if (c[u] < 0) continue;
+    for (int v = 0; v < 2; ++v) {
+      if (c[v] < 0) continue;
+      const Eigen::Matrix4d B = J[u]->transpose() * (*J[v]);
+      for (int r = 0; r < 4; ++r)
+        for (int s = 0; s < 4; ++s) trip->emplace_back(4 * c[u] + r, 4 * c[v] + s, B(r, s));
+    }
+  }
 }
 
 }  // namespace
@@ -109,15 +116,7 @@ bool CondensedGraph::marginal(int gauge, int query, const Eigen::Matrix3d& frame
     const int ia = col[edges_[e].from], ib = col[edges_[e].to];
     const Eigen::Matrix4d* J[2] = {&L.Ja, &L.Jb};
     const int c[2] = {ia, ib};
-    for (int u = 0; u < 2; ++u) {
-      if (c[u] < 0) continue;
-      for (int v = 0; v < 2; ++v) {
-        if (c[v] < 0) continue;
-        const Eigen::Matrix4d B = J[u]->transpose() * (*J[v]);
-        for (int r = 0; r < 4; ++r)
-          for (int s = 0; s < 4; ++s) trip.emplace_back(4 * c[u] + r, 4 * c[v] + s, B(r, s));
-      }
-    }
+    addHessianBlocks(J, c, &trip);
   }
   Eigen::SparseMatrix<double> H(4 * n, 4 * n);
   H.setFromTriplets(trip.begin(), trip.end());
@@ -150,16 +149,9 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok) {
       const Linearised L = linearise(e);
       const Eigen::Matrix4d* J[2] = {&L.Ja, &L.Jb};
       const int c[2] = {col[edges_[e].from], col[edges_[e].to]};
-      for (int u = 0; u < 2; ++u) {
-        if (c[u] < 0) continue;
-        g.segment<4>(4 * c[u]) += J[u]->transpose() * L.r;
-        for (int v = 0; v < 2; ++v) {
-          if (c[v] < 0) continue;
-          const Eigen::Matrix4d B = J[u]->transpose() * (*J[v]);
-          for (int r = 0; r < 4; ++r)
-            for (int s = 0; s < 4; ++s) trip.emplace_back(4 * c[u] + r, 4 * c[v] + s, B(r, s));
-        }
-      }
+      for (int u = 0; u < 2; ++u)
+        if (c[u] >= 0) g.segment<4>(4 * c[u]) += J[u]->transpose() * L.r;
+      addHessianBlocks(J, c, &trip);
     }
     Eigen::SparseMatrix<double> H(4 * n, 4 * n);
     H.setFromTriplets(trip.begin(), trip.end());

@@ -1,21 +1,11 @@
 #include "rover_loop_fusion/core/drift.h"
 
+#include "rover_loop_fusion/core/geometry.h"
+
 #include <algorithm>
 
 namespace rover_loop_fusion {
 namespace core {
-
-namespace {
-
-/// E = [e_z]x: d(Rz(yaw) x)/d yaw at yaw = 0 is E x.
-Eigen::Matrix3d yawGenerator() {
-  Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
-  E(0, 1) = -1.0;
-  E(1, 0) = 1.0;
-  return E;
-}
-
-}  // namespace
 
 Eigen::Matrix4d DriftModel::stepCovariance(double length) const {
   const double l = std::max(length, min_step);

@@ -62,6 +62,14 @@ inline Eigen::Vector3d rotationToYawPitchRoll(const Eigen::Matrix3d& R) {
 /// Yaw (radians, Z-Y-X) of a rotation.
 inline double yawOf(const Eigen::Quaterniond& q) { return rotationToYawPitchRoll(q.toRotationMatrix())[0]; }
 
+/// E = [e_z]x: d(Rz(yaw) x)/d yaw at yaw = 0 is E x.
+inline Eigen::Matrix3d yawGenerator() {
+  Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
+  E(0, 1) = -1.0;
+  E(1, 0) = 1.0;
+  return E;
+}
+
 /// A rotation about the z axis.
 inline Eigen::Quaterniond yawRotation(double yaw) {
   return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));

@@ -115,9 +115,6 @@ void LoopFusionAdapter::Impl::collectDecisions() {
     const core::LoopCandidate& c = d.candidate;
     const std::pair<int64_t, int64_t> key(c.query_index, c.match_index);
     core::Verdict v = d.verdict;
-    v.query_index = c.query_index;
-    v.match_index = c.match_index;
-    v.deferred = false;
     VerdictContext ctx;
     ctx.verifier = host->verifierType();
     ctx.decision = core::toString(d.kind);

@@ -282,6 +282,12 @@ core::Verdict VerifierHost::decide(const core::LoopCandidate& c) noexcept {
 std::vector<core::LoopDecision> VerifierHost::takeDecisions() noexcept {
   std::vector<core::LoopDecision> out;
   if (verifier_) guarded("verifier " + type_ + ": takeDecisions (decisions lost)", [&] { out = verifier_->takeDecisions(); });
+  for (core::LoopDecision& d : out) {
+    // The final verdict of a held or committed loop, about the decision's own candidate.
+    d.verdict.query_index = d.candidate.query_index;
+    d.verdict.match_index = d.candidate.match_index;
+    d.verdict.deferred = false;
+  }
   return out;
 }
 

@@ -139,8 +139,9 @@ class VerifierHost {
   /// verifier.
   core::Verdict decide(const core::LoopCandidate& c) noexcept;
 
-  /// The plugin's decisions since the last call (LoopVerifier::takeDecisions); empty if it
-  /// threw (logged) or no verifier runs. Call after every addKeyframe() and decide().
+  /// The plugin's decisions since the last call (LoopVerifier::takeDecisions), each verdict
+  /// final (not deferred) and naming the decision's candidate; empty if it threw (logged) or
+  /// no verifier runs. Call after every addKeyframe() and decide().
   std::vector<core::LoopDecision> takeDecisions() noexcept;
 
   /// Logs v (INFO; WARN for invalid_input and revoked) as "<what> accepted/HELD/REJECTED/

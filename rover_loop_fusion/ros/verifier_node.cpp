@@ -453,9 +453,6 @@ void VerifierNode::applyDecisions() {
     const core::LoopCandidate& c = d.candidate;
     const std::pair<int64_t, int64_t> key(c.query_index, c.match_index);
     core::Verdict v = d.verdict;
-    v.query_index = c.query_index;
-    v.match_index = c.match_index;
-    v.deferred = false;
     // What the candidate message said (inliers, stamps): kept for held candidates and loops.
     LoopCandidate msg;
     msg.query_index = c.query_index;

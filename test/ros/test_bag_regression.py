@@ -55,6 +55,7 @@ class BagRegression(unittest.TestCase):
         cls.by_key = {bag_replay.verdict_key(v): v for v in cls.client.verdicts}
         with open(os.path.join(ROOT, "config", "rover_indoor.yaml")) as f:
             cls.defaults = yaml.safe_load(f)
+        cls.defaults["time_budget_ms"] = 0  # bag_regression.test turns the wall-clock budget off
 
     def test_default_parameters(self):
         self.assertEqual(rospy.get_param(self.node + "/rover"), self.defaults)
@@ -114,7 +115,7 @@ class BagRegression(unittest.TestCase):
         tool = find_tool("rover_replay")
         self.assertIsNotNone(tool, "rover_replay not built")
         with tempfile.TemporaryDirectory() as out:
-            subprocess.run([tool, "--scenario", self.scenario, "--out", out, "--quiet"], check=True,
+            subprocess.run([tool, "--scenario", self.scenario, "--out", out, "--quiet", "--time_budget_ms", "0"], check=True,
                            stdout=subprocess.DEVNULL)
             with open(os.path.join(out, "verdicts.csv")) as f:
                 rows = list(csv.DictReader(f))
