@@ -60,7 +60,7 @@ def select_cases(family, a):
 
 def decision_args(a):
     """The rover_replay flags of --decision for ROVER's sequential run (none: the YAML's)."""
-    return ["--decision", a.decision] if getattr(a, "decision", None) else []
+    return ["--decision", a.decision] if a.decision else []
 
 
 def decision_note(a):
