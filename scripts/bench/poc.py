@@ -6,7 +6,7 @@ laps with the first loop after 1-2 km, a scene without true loops); roverlib/spl
 them, tuning and test.
 
   ./scripts/bench.sh poc [--split test|tuning] [--quick] [--cases A,B] [--snapshots 10]
-                         [--jobs 2] [--out results/poc]
+                         [--decision metric|chi2] [--jobs 2] [--out results/poc]
 
 Per case (rover_replay, the trial solve's wall-clock time budget lifted: ">200ms" is the share
 of verifications that took longer and would have failed closed):
@@ -42,7 +42,7 @@ TRAJ_COLUMNS = [("case", "case", ""), ("ate_odometry", "odometry", ".2f"),
 
 
 def run_case(job):
-    case, out, snapshots = job
+    case, out, snapshots, decision = job
     s = case.build()
     d = os.path.join(out, "scenarios", case.name)
     scenario.write(s, d)
@@ -57,7 +57,7 @@ def run_case(job):
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
     prob = problem.from_scenario(s, drift_model.MODELS[case.environment], "4dof")
-    info, rows = methods.evaluate(case, d, prob, [], out, methods=("rover", "accept_all"), snapshots=snapshots)
+    info, rows = methods.evaluate(case, d, prob, decision, out, methods=("rover", "accept_all"), snapshots=snapshots)
     row.update(info)
     for r in rows:
         if r["method"].startswith("rover"):
@@ -104,13 +104,14 @@ def main(argv=None):
     cases = bench.select_cases("poc", a)
     os.makedirs(a.out, exist_ok=True)
     with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(run_case, [(c, a.out, a.snapshots) for c in cases]))
+        results = list(pool.map(run_case, [(c, a.out, a.snapshots, bench.decision_args(a)) for c in cases]))
     case_rows = [r for r, _, _ in results]
     summary = [x for _, rows, _ in results for x in rows]
     bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
     bench.write_csv(case_rows, os.path.join(a.out, "cases.csv"))
     ind, outd = bench.defaults("indoor"), bench.defaults("outdoor")
-    notes = [f"split: {a.split}{' (quick)' if a.quick else ''}; cases and seeds: roverlib/splits.py",
+    notes = [bench.decision_note(a),
+             f"split: {a.split}{' (quick)' if a.quick else ''}; cases and seeds: roverlib/splits.py",
              f"ROVER at the shipped defaults: indoor {ind['threshold']:g} m, gate {ind['max_innovation']:g} m + "
              f"{ind['max_innovation_per_metre']:g} x path; outdoor {outd['threshold']:g} m, gate "
              f"{outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path; 4-DoF; time budget lifted",

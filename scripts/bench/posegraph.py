@@ -5,7 +5,8 @@ same graphs, candidates and order. Tuning and test graphs: roverlib/splits.py (t
 manhattan3500, ring; test ringCity, kitti_00, parking-garage).
 
   ./scripts/bench.sh posegraph [--split test|tuning] [--quick] [--cases A,B] [--max-loops N]
-                               [--snapshots 10] [--time-limit 600] [--jobs 2] [--out results/posegraph]
+                               [--snapshots 10] [--time-limit 600] [--decision metric|chi2] [--jobs 2]
+                               [--out results/posegraph]
 
 Per case (graph, outlier kind, fraction; roverlib/g2o.py says how each kind is made, seeds fixed):
 the odometry chain is the "VIO", the file's loops (a fixed-seed subsample: at most 200, 100 on
@@ -52,7 +53,7 @@ def graph_and_truth(name):
 
 
 def run_case(job):
-    case, out, snapshots, time_limit, max_loops = job
+    case, out, snapshots, time_limit, max_loops, decision = job
     k = case.kwargs
     graph, truth, _ = graph_and_truth(k["graph"])
     true_loops = g2o.subsample_loops(graph, max_loops or MAX_LOOPS.get(k["graph"], 200), seed=k["seed"])
@@ -62,7 +63,7 @@ def run_case(job):
     scenario.write(g2o.to_scenario(graph, true_loops, outliers, truth, seed=k["seed"],
                                    meta={"outliers": k["kind"], "fraction": k["fraction"]}), d)
     prob = problem.from_g2o(graph, g2o.ordered_candidates(true_loops, outliers, k["seed"]), truth)
-    info, rows = methods.evaluate(case, d, prob, ["--max_relative_yaw_deg", 180], out, snapshots=snapshots,
+    info, rows = methods.evaluate(case, d, prob, ["--max_relative_yaw_deg", 180, *decision], out, snapshots=snapshots,
                                   time_limit=time_limit)
     info.update(graph=k["graph"], kind=k["kind"], pct=int(round(100 * k["fraction"])))
     print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
@@ -119,7 +120,8 @@ def main(argv=None):
     cost = {"kitti_00": 0, "parking-garage": 1, "manhattan3500": 2, "ringCity": 3, "ring": 4}
     order = sorted(range(len(cases)), key=lambda i: cost.get(cases[i].kwargs["graph"], 5))
     with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        done = dict(zip(order, pool.map(run_case, [(cases[i], a.out, a.snapshots, a.time_limit, max_loops)
+        done = dict(zip(order, pool.map(run_case, [(cases[i], a.out, a.snapshots, a.time_limit, max_loops,
+                                                    bench.decision_args(a))
                                                    for i in order])))
     results = [done[i] for i in range(len(cases))]
     summary = [x for _, rows in results for x in rows]
@@ -128,7 +130,8 @@ def main(argv=None):
     bench.write_csv(wide, os.path.join(a.out, "cases.csv"))
     params = bench.defaults("outdoor")
     graphs = list(dict.fromkeys(c.kwargs["graph"] for c in cases))
-    notes = [f"split: {a.split}{' (quick)' if a.quick else ''}; graphs, kinds, fractions, seeds: roverlib/splits.py",
+    notes = [bench.decision_note(a),
+             f"split: {a.split}{' (quick)' if a.quick else ''}; graphs, kinds, fractions, seeds: roverlib/splits.py",
              f"ROVER at config/rover_outdoor.yaml: {params['threshold']:g} m, gate {params['max_innovation']:g} m + "
              f"{params['max_innovation_per_metre']:g} x path; time budget and |yaw| limit lifted",
              f"true loops per graph: at most {max_loops or 200} ({max_loops or MAX_LOOPS['parking-garage']} on "

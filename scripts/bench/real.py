@@ -6,7 +6,8 @@ vertically or along the heading) in rows with a row before the first true loop. 
 test sequences: roverlib/splits.py (never the same sequence on both sides).
 
   ./scripts/bench.sh real [--split test|tuning] [--quick] [--cases A,B] [--snapshots 10]
-                          [--time-limit 600] [--jobs 2] [--out results/real]
+                          [--time-limit 600] [--decision metric|chi2] [--jobs 2]
+                          [--out results/real]
 
 Per case, on the same candidates in the same order (roverlib/methods.py):
   ROVER        rover_replay, sequential, at the environment's shipped YAML (EuRoC indoor 4-DoF,
@@ -35,7 +36,7 @@ CASE_COLUMNS = [("case", "case", ""), ("keyframes", "kf", "d"), ("true", "true",
 
 
 def run_case(job):
-    case, out, snapshots, time_limit = job
+    case, out, snapshots, time_limit, decision = job
     s = case.build()
     mode, alignment, env = s.meta["mode"], s.meta["alignment"], s.meta["environment"]
     params = bench.defaults(env)
@@ -52,7 +53,7 @@ def run_case(job):
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
     prob = problem.from_scenario(s, drift_model.MODELS[env], mode)
-    info, rows = methods.evaluate(case, d, prob, ["--alignment", alignment], out, snapshots=snapshots,
+    info, rows = methods.evaluate(case, d, prob, ["--alignment", alignment, *decision], out, snapshots=snapshots,
                                   time_limit=time_limit)
     row.update(info)
     print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
@@ -94,13 +95,15 @@ def main(argv=None):
     cases = bench.select_cases("real", a)
     os.makedirs(a.out, exist_ok=True)
     with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(run_case, [(c, a.out, a.snapshots, a.time_limit) for c in cases]))
+        results = list(pool.map(run_case, [(c, a.out, a.snapshots, a.time_limit, bench.decision_args(a))
+                                           for c in cases]))
     summary = [x for _, rows, _ in results for x in rows]
     bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
     wide = methods.wide_rows([r for r, _, _ in results], summary)
     bench.write_csv(wide, os.path.join(a.out, "cases.csv"))
     ind, outd = bench.defaults("indoor"), bench.defaults("outdoor")
-    notes = [f"split: {a.split}{' (quick)' if a.quick else ''}; sequences and seeds: roverlib/splits.py",
+    notes = [bench.decision_note(a),
+             f"split: {a.split}{' (quick)' if a.quick else ''}; sequences and seeds: roverlib/splits.py",
              f"ROVER at the shipped defaults: EuRoC indoor {ind['threshold']:g} m, gate {ind['max_innovation']:g} m + "
              f"{ind['max_innovation_per_metre']:g} x path, 4-DoF; KITTI outdoor {outd['threshold']:g} m, gate "
              f"{outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path, 6-DoF; time budget lifted",

@@ -32,6 +32,9 @@ def family_arguments(ap, family, jobs=True):
     ap.add_argument("--quick", action="store_true", help="the CI subset of the split")
     ap.add_argument("--cases", help="only these case names (comma-separated)")
     ap.add_argument("--out", default=os.path.join(RESULTS, family))
+    ap.add_argument("--decision", choices=("metric", "chi2"),
+                    help="ROVER's decision mode instead of the shipped YAML's (rover_replay --decision after "
+                         "--config; chi2 is 4-DoF only: 6-DoF cases decide metric whatever this says)")
     ap.add_argument("--time-limit", type=float, default=600.0,
                     help="seconds per baseline (GNC, DCS, PCM, IPC) and case; a run that hits it is reported")
     if jobs:
@@ -53,6 +56,16 @@ def select_cases(family, a):
         if not chosen:
             sys.exit(f"no {a.split} case of {family} is named {a.cases}")
     return chosen
+
+
+def decision_args(a):
+    """The rover_replay flags of --decision for ROVER's sequential run (none: the YAML's)."""
+    return ["--decision", a.decision] if a.decision else []
+
+
+def decision_note(a):
+    """The summary.md note that says which decision mode ROVER ran with."""
+    return f"ROVER decision: {a.decision} (--decision)" if a.decision else "ROVER decision: the YAML's (decision:)"
 
 
 def run_limited(fn, args=(), limit_s=600.0):

@@ -203,9 +203,17 @@ def temporal_ate(reference, snapshots, align="se3", max_diff=0.01):
     """Temporal ATE: the mean of the ATEs of what the system showed at k evenly spaced times,
     each against the ground truth of the keyframes it had by then. `snapshots` is the list of
     those k trajectories (e.g. rover_replay --snapshots K), each holding only the keyframes
-    registered so far."""
+    registered so far. A snapshot that cannot be aligned (its keyframes still on one line, e.g.
+    the first stretch of a corridor: the rotation about that line is not determined) is left out
+    of the mean."""
+    from evo.core.geometry import GeometryException
     ref = read_tum(reference) if isinstance(reference, str) else reference
-    values = [ate(ref, s, align, max_diff) for s in snapshots]
+    values = []
+    for s in snapshots:
+        try:
+            values.append(ate(ref, s, align, max_diff))
+        except GeometryException:
+            continue
     return float(np.mean(values)) if values else float("nan")
 
 

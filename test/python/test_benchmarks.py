@@ -136,3 +136,18 @@ def test_cost_quick(tmp_path):
     assert [(r["case"], r["method"]) for r in summary][:2] == [("4dof_1000kf_span100", "rover"),
                                                                ("4dof_1000kf_span100", "loop_fusion_full")]
     _pngs(tmp_path, ["cost.png"])
+
+
+def test_decision_flag_reaches_rover_replay(tmp_path):
+    """--decision chi2 runs ROVER's sequential replay in units of drift: its verdicts compare the
+    innovation's Mahalanobis distance with the chi-square gate (4 dof, gate_probability 0.999 of
+    the YAML), not the YAML's 0.2 m threshold."""
+    from scipy.stats import chi2
+    assert bench_poc.main(["--quick", "--cases", "room_s0.05", "--decision", "chi2", "--snapshots", "2", "--jobs", "1",
+                           "--out", str(tmp_path)]) == 0
+    verdicts = _rows(tmp_path / "runs" / "room_s0.05" / "rover" / "verdicts.csv")
+    assert len(verdicts) == 80
+    assert all(float(v["threshold"]) == pytest.approx(chi2.ppf(0.999, 4), abs=1e-4) for v in verdicts)
+    assert {v["reason"] for v in verdicts} <= {"accepted", "inconsistent_with_drift", "lookalike_closer"}
+    assert "ROVER decision: chi2" in (tmp_path / "summary.md").read_text()
+    _summary(tmp_path / "summary.csv", "poc")

@@ -127,6 +127,21 @@ def test_temporal_ate_is_the_mean_over_snapshots():
     assert [t.num_poses for t in parts] == [27, 54, 80]
 
 
+def test_temporal_ate_leaves_out_snapshots_that_cannot_be_aligned():
+    from evo.core.geometry import GeometryException
+    p = _square()
+    stamps = np.arange(len(p), dtype=float)
+    gt = metrics.trajectory(stamps, p)
+    line = metrics.trajectory(stamps[:5], p[:5])  # the first side so far: keyframes on one line
+    with pytest.raises(GeometryException):
+        metrics.ate(gt, line, "se3")
+    d = 0.1
+    zz = p.copy()
+    zz[:, 2] = d * (-1.0) ** np.arange(len(p))
+    assert metrics.temporal_ate(gt, [line, metrics.trajectory(stamps, zz)], "se3") == pytest.approx(d, rel=1e-3)
+    assert math.isnan(metrics.temporal_ate(gt, [line], "se3"))
+
+
 def test_evaluate_cli_writes_metrics_and_pr_curve(tmp_path):
     rows = [(10, 1, True, "accepted", 0.05), (11, 2, False, "score_above_threshold", 0.4),
             (12, 3, False, "score_above_threshold", 0.2), (13, 4, True, "accepted", 0.1)]
