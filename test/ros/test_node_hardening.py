@@ -198,11 +198,12 @@ class NodeHardening(unittest.TestCase):
             node.stop()
 
     def test_sigint_with_a_backlog_stops_promptly_and_says_what_it_did_not_verify(self):
-        # 1000 keyframes on a line and 60 candidates claiming its ends meet (500 m apart),
+        # 1000 keyframes on a line and 400 candidates claiming its ends meet (500 m apart),
         # with the innovation gate and the time budget off: each trial solve takes a while.
         # After SIGINT the node finishes the verification under way, gives every candidate
-        # it did not decide an invalid_input verdict saying so, logs it and exits.
-        n = 60
+        # it did not decide an invalid_input verdict saying so, logs it and exits. (With 60
+        # candidates a fast run had verified them all before the signal arrived.)
+        n = 400
         log = tempfile.NamedTemporaryFile(suffix=".csv", delete=False).name
         os.unlink(log)
         node = Node("sigint", {"candidate_timeout": 600.0, "optimize_period": 0.0, "verdict_log": log,
