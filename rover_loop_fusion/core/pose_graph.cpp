@@ -106,7 +106,7 @@ struct Correction {
 
 }  // namespace
 
-struct PoseGraph::Impl {
+struct KeyframeGraph::Impl {
   struct Keyframe {
     int64_t index;
     double stamp;
@@ -281,7 +281,7 @@ struct PoseGraph::Impl {
   void spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg);
 };
 
-bool PoseGraph::Impl::find(int64_t index, size_t* pos) const {
+bool KeyframeGraph::Impl::find(int64_t index, size_t* pos) const {
   auto it = std::lower_bound(kfs.begin(), kfs.end(), index,
                              [](const Keyframe& k, int64_t i) { return k.index < i; });
   if (it == kfs.end() || it->index != index) return false;
@@ -289,7 +289,7 @@ bool PoseGraph::Impl::find(int64_t index, size_t* pos) const {
   return true;
 }
 
-int PoseGraph::Impl::root(int segment) {
+int KeyframeGraph::Impl::root(int segment) {
   auto it = seg_parent.find(segment);
   if (it == seg_parent.end()) {
     seg_parent[segment] = segment;
@@ -301,7 +301,7 @@ int PoseGraph::Impl::root(int segment) {
   return r;
 }
 
-std::string PoseGraph::Impl::implausibleStep(const Keyframe& a, const Keyframe& b) const {
+std::string KeyframeGraph::Impl::implausibleStep(const Keyframe& a, const Keyframe& b) const {
   std::ostringstream s;
   s.precision(17);
   const double jump = (b.vio.t - a.vio.t).norm();
@@ -323,7 +323,7 @@ std::string PoseGraph::Impl::implausibleStep(const Keyframe& a, const Keyframe& 
   return s.str();
 }
 
-KeyframeState PoseGraph::Impl::stateFromPose(const Pose& p) const {
+KeyframeState KeyframeGraph::Impl::stateFromPose(const Pose& p) const {
   KeyframeState s;
   for (int k = 0; k < 3; ++k) s.t[k] = p.t[k];
   s.yaw = rotationToYawPitchRoll(p.q.toRotationMatrix())[0];
@@ -335,7 +335,7 @@ KeyframeState PoseGraph::Impl::stateFromPose(const Pose& p) const {
   return s;
 }
 
-Pose PoseGraph::Impl::poseFromState(const KeyframeState& s, const Keyframe& kf) const {
+Pose KeyframeGraph::Impl::poseFromState(const KeyframeState& s, const Keyframe& kf) const {
   Pose p;
   p.t = Eigen::Vector3d(s.t[0], s.t[1], s.t[2]);
   if (fourDof()) {
@@ -346,11 +346,11 @@ Pose PoseGraph::Impl::poseFromState(const KeyframeState& s, const Keyframe& kf) 
   return p;
 }
 
-Eigen::Matrix3d PoseGraph::Impl::rotationOf(const KeyframeState& s, const Keyframe& kf) const {
+Eigen::Matrix3d KeyframeGraph::Impl::rotationOf(const KeyframeState& s, const Keyframe& kf) const {
   return poseFromState(s, kf).q.toRotationMatrix();
 }
 
-Correction PoseGraph::Impl::correctionBetween(const KeyframeState& before, const KeyframeState& after,
+Correction KeyframeGraph::Impl::correctionBetween(const KeyframeState& before, const KeyframeState& after,
                                               const Keyframe& kf) const {
   Correction c;
   if (fourDof()) {
@@ -365,7 +365,7 @@ Correction PoseGraph::Impl::correctionBetween(const KeyframeState& before, const
   return c;
 }
 
-KeyframeState PoseGraph::Impl::applyCorrection(const Correction& c, const KeyframeState& s,
+KeyframeState KeyframeGraph::Impl::applyCorrection(const Correction& c, const KeyframeState& s,
                                                const Keyframe& kf) const {
   KeyframeState o = s;
   const Eigen::Vector3d t = c.R * Eigen::Vector3d(s.t[0], s.t[1], s.t[2]) + c.t;
@@ -382,18 +382,18 @@ KeyframeState PoseGraph::Impl::applyCorrection(const Correction& c, const Keyfra
   return o;
 }
 
-Pose PoseGraph::Impl::applyCorrection(const Correction& c, const Pose& p) const {
+Pose KeyframeGraph::Impl::applyCorrection(const Correction& c, const Pose& p) const {
   return Pose(c.R * p.t + c.t, Eigen::Quaterniond(c.R * p.q.toRotationMatrix()));
 }
 
-void PoseGraph::Impl::setYawPitchRoll(Keyframe& kf) const {
+void KeyframeGraph::Impl::setYawPitchRoll(Keyframe& kf) const {
   const Eigen::Vector3d ypr = rotationToYawPitchRoll(kf.vio.q.toRotationMatrix());
   kf.yaw = ypr[0];
   kf.pitch = ypr[1];
   kf.roll = ypr[2];
 }
 
-std::shared_ptr<ceres::CostFunction> PoseGraph::Impl::edgeCost(const Eigen::Vector3d& t_ij,
+std::shared_ptr<ceres::CostFunction> KeyframeGraph::Impl::edgeCost(const Eigen::Vector3d& t_ij,
                                                                double yaw_ij,
                                                                const Eigen::Quaterniond& q_ij, const Keyframe& from,
                                                                double yaw_weight, const Matrix6d* information) const {
@@ -408,7 +408,7 @@ std::shared_ptr<ceres::CostFunction> PoseGraph::Impl::edgeCost(const Eigen::Vect
       SixDofEdgeError::create(t_ij, q_ij, kSixDofTranslationSigma, kSixDofRotationSigma, &L));
 }
 
-void PoseGraph::Impl::setOdometryCost(Edge& e) const {
+void KeyframeGraph::Impl::setOdometryCost(Edge& e) const {
   const Keyframe& a = kfs[e.from];
   const Keyframe& b = kfs[e.to];
   const Eigen::Vector3d t_ab = a.vio.q.conjugate() * (b.vio.t - a.vio.t);
@@ -416,13 +416,13 @@ void PoseGraph::Impl::setOdometryCost(Edge& e) const {
                     e.information.get());
 }
 
-void PoseGraph::Impl::setLoopCost(Edge& e) const {
+void KeyframeGraph::Impl::setLoopCost(Edge& e) const {
   const LoopCandidate& c = e.loop;
   e.cost = edgeCost(c.relative_t, c.relative_yaw, c.relative_q.normalized(), kfs[e.from], kLoopYawWeight,
                     e.information.get());
 }
 
-std::string PoseGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
+std::string KeyframeGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
   if (c.query_index < 0 || c.match_index < 0) return "negative keyframe index";
   if (c.query_index == c.match_index) return "loop from keyframe " + describeIndex(c.query_index) + " to itself";
   if (!find(c.query_index, qpos)) return "unknown query keyframe " + describeIndex(c.query_index);
@@ -450,7 +450,7 @@ std::string PoseGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos, siz
   return std::string();
 }
 
-void PoseGraph::Impl::addBlocks(Trial& tr, KeyframeState& s, bool constant) {
+void KeyframeGraph::Impl::addBlocks(Trial& tr, KeyframeState& s, bool constant) {
   if (fourDof()) {
     tr.problem.AddParameterBlock(&s.yaw, 1);
     compat::setManifold(tr.problem, &s.yaw, angle_manifold.get());
@@ -465,7 +465,7 @@ void PoseGraph::Impl::addBlocks(Trial& tr, KeyframeState& s, bool constant) {
   }
 }
 
-KeyframeState* PoseGraph::Impl::stateFor(Trial& tr, size_t p) {
+KeyframeState* KeyframeGraph::Impl::stateFor(Trial& tr, size_t p) {
   if (p >= tr.first && tr.local[p - tr.first] >= 0) return &tr.states[tr.local[p - tr.first]];
   tr.constants.push_back(x[p]);
   KeyframeState* s = &tr.constants.back();
@@ -473,13 +473,13 @@ KeyframeState* PoseGraph::Impl::stateFor(Trial& tr, size_t p) {
   return s;
 }
 
-void PoseGraph::Impl::addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss) {
+void KeyframeGraph::Impl::addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss) {
   KeyframeState* a = stateFor(tr, e.from);
   KeyframeState* b = stateFor(tr, e.to);
   tr.problem.AddResidualBlock(e.cost.get(), loss, rotBlock(*a), a->t, rotBlock(*b), b->t);
 }
 
-void PoseGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
+void KeyframeGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
                                  ceres::LossFunction* extra_loss) {
   tr.first = first;
   tr.local.assign(kfs.size() - first, -1);
@@ -503,7 +503,7 @@ void PoseGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool fr
   if (extra) addEdge(tr, *extra, extra_loss);
 }
 
-SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms,
+SolveSummary KeyframeGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms,
                                     Clock::time_point start, DeadlineCallback* callback) {
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
@@ -541,19 +541,19 @@ SolveSummary PoseGraph::Impl::solve(Trial& tr, int max_iterations, double time_b
   return o;
 }
 
-void PoseGraph::Impl::learnCost(size_t window, double total_ms, const DeadlineCallback& callback) {
+void KeyframeGraph::Impl::learnCost(size_t window, double total_ms, const DeadlineCallback& callback) {
   if (window < 500 || callback.longest_ms <= 0) return;
   setup_cost.learn(std::max(0.0, total_ms - callback.iterations_ms) / window);
   iteration_cost.learn(callback.longest_ms / window);
 }
 
-double PoseGraph::Impl::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+double KeyframeGraph::Impl::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
   const Pose q = poseFromState(x[qpos], kfs[qpos]);
   const Pose m = poseFromState(x[mpos], kfs[mpos]);
   return (m.q.conjugate() * (q.t - m.t) - c.relative_t).norm();
 }
 
-double PoseGraph::Impl::pathLength(size_t from, size_t to) const {
+double KeyframeGraph::Impl::pathLength(size_t from, size_t to) const {
   std::vector<size_t> nodes = {from, to};
   for (const Edge& e : loops) {
     nodes.push_back(e.from);
@@ -598,12 +598,12 @@ double PoseGraph::Impl::pathLength(size_t from, size_t to) const {
   return dist[dst];
 }
 
-size_t PoseGraph::Impl::windowStart(size_t match_pos) const {
+size_t KeyframeGraph::Impl::windowStart(size_t match_pos) const {
   const size_t margin = static_cast<size_t>(std::max(0, cfg.window_margin));
   return match_pos > margin ? match_pos - margin : 0;
 }
 
-void PoseGraph::Impl::adopt(const std::vector<size_t>& positions,
+void KeyframeGraph::Impl::adopt(const std::vector<size_t>& positions,
                             const std::vector<KeyframeState>& states) {
   if (positions.empty()) return;
   const size_t last = positions.back();
@@ -615,7 +615,7 @@ void PoseGraph::Impl::adopt(const std::vector<size_t>& positions,
   }
 }
 
-void PoseGraph::Impl::anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos) {
+void KeyframeGraph::Impl::anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos) {
   const Keyframe& old_kf = kfs[mpos];
   const Keyframe& cur = kfs[qpos];
   const Eigen::Matrix3d w_R_old = old_kf.vio.q.toRotationMatrix();
@@ -656,7 +656,7 @@ constexpr double kSpreadTranslation = 1e-4;  // m
 constexpr double kSpreadYaw = 1e-6;          // rad
 }  // namespace
 
-void PoseGraph::Impl::appendMoments(size_t pos) {
+void KeyframeGraph::Impl::appendMoments(size_t pos) {
   const Keyframe& kf = kfs[pos];
   auto it = chains.find(kf.segment);
   if (it == chains.end()) {
@@ -668,7 +668,7 @@ void PoseGraph::Impl::appendMoments(size_t pos) {
   ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(), drift.stepCovariance(length));
 }
 
-void PoseGraph::Impl::rebuildMoments(int sequence) {
+void KeyframeGraph::Impl::rebuildMoments(int sequence) {
   for (auto& kv : chains) {
     if (kfs[kv.second.start].sequence != sequence) continue;
     const size_t start = kv.second.start, n = kv.second.moments.size();
@@ -677,21 +677,21 @@ void PoseGraph::Impl::rebuildMoments(int sequence) {
   }
 }
 
-Eigen::Matrix4d PoseGraph::Impl::loopCovariance() const {
+Eigen::Matrix4d KeyframeGraph::Impl::loopCovariance() const {
   Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
   C(0, 0) = C(1, 1) = C(2, 2) = cfg.loop_sigma * cfg.loop_sigma;
   C(3, 3) = cfg.loop_sigma_yaw * cfg.loop_sigma_yaw;
   return C;
 }
 
-int PoseGraph::Impl::componentOf(size_t pos) const {
+int KeyframeGraph::Impl::componentOf(size_t pos) const {
   int s = kfs[pos].segment;
   for (auto it = seg_parent.find(s); it != seg_parent.end() && it->second != s; it = seg_parent.find(s))
     s = it->second;
   return s;
 }
 
-std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::loopReps(int component) const {
+std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::loopReps(int component) const {
   if (reps_revision != revision) {
     reps_cache.clear();
     reps_revision = revision;
@@ -701,7 +701,7 @@ std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::loopReps(int component) c
   return it->second;
 }
 
-std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::computeLoopReps(int component) const {
+std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(int component) const {
   std::vector<const Edge*> in;
   for (const Edge& e : loops)
     if (componentOf(e.to) == component) in.push_back(&e);
@@ -739,7 +739,7 @@ std::vector<PoseGraph::Impl::LoopRep> PoseGraph::Impl::computeLoopReps(int compo
   return reps;
 }
 
-bool PoseGraph::Impl::condense(int component, const std::vector<size_t>& extra, double variance_scale,
+bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& extra, double variance_scale,
                                CondensedGraph* cg, std::vector<size_t>* anchors) const {
   const std::vector<LoopRep> reps = loopReps(component);
   std::vector<size_t>& a = *anchors;
@@ -784,7 +784,7 @@ bool PoseGraph::Impl::condense(int component, const std::vector<size_t>& extra, 
   return true;
 }
 
-void PoseGraph::Impl::spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg) {
+void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg) {
   auto stateOf = [&](int i) {
     KeyframeState s = x[anchors[i]];
     const AnchorState& a = cg.state(i);
@@ -847,11 +847,11 @@ void PoseGraph::Impl::spread(int component, const std::vector<size_t>& anchors, 
 
 // ---------------------------------------------------------------------------------------
 
-PoseGraph::PoseGraph(const VerifierConfig& config) : config_(config), impl_(new Impl(config_)) {}
+KeyframeGraph::KeyframeGraph(const VerifierConfig& config) : config_(config), impl_(new Impl(config_)) {}
 
-PoseGraph::~PoseGraph() = default;
+KeyframeGraph::~KeyframeGraph() = default;
 
-Status PoseGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
+Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
                               const Eigen::Quaterniond& q) {
   Impl& m = *impl_;
   const std::string who = "keyframe " + describeIndex(index) + ": ";
@@ -960,22 +960,22 @@ Status PoseGraph::addKeyframe(int64_t index, double stamp, int sequence, const E
   return status;
 }
 
-size_t PoseGraph::keyframeCount() const { return impl_->kfs.size(); }
+size_t KeyframeGraph::keyframeCount() const { return impl_->kfs.size(); }
 
-bool PoseGraph::hasKeyframe(int64_t index) const {
+bool KeyframeGraph::hasKeyframe(int64_t index) const {
   size_t pos;
   return impl_->find(index, &pos);
 }
 
-bool PoseGraph::find(int64_t index, size_t* position) const { return impl_->find(index, position); }
+bool KeyframeGraph::find(int64_t index, size_t* position) const { return impl_->find(index, position); }
 
-int PoseGraph::sequenceAt(size_t position) const { return impl_->kfs[position].sequence; }
+int KeyframeGraph::sequenceAt(size_t position) const { return impl_->kfs[position].sequence; }
 
-std::string PoseGraph::checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
+std::string KeyframeGraph::checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const {
   return impl_->checkLoop(c, qpos, mpos);
 }
 
-Status PoseGraph::addLoop(const LoopCandidate& c) {
+Status KeyframeGraph::addLoop(const LoopCandidate& c) {
   Impl& m = *impl_;
   size_t qpos = 0, mpos = 0;
   const std::string bad = m.checkLoop(c, &qpos, &mpos);
@@ -998,22 +998,22 @@ Status PoseGraph::addLoop(const LoopCandidate& c) {
   return Status::Ok();
 }
 
-size_t PoseGraph::loopCount() const { return impl_->loops.size(); }
+size_t KeyframeGraph::loopCount() const { return impl_->loops.size(); }
 
-bool PoseGraph::connected(size_t a, size_t b) const {
+bool KeyframeGraph::connected(size_t a, size_t b) const {
   return impl_->root(impl_->kfs[a].segment) == impl_->root(impl_->kfs[b].segment);
 }
 
-uint64_t PoseGraph::revision() const { return impl_->revision; }
+uint64_t KeyframeGraph::revision() const { return impl_->revision; }
 
-bool PoseGraph::estimate(int64_t index, Pose* pose) const {
+bool KeyframeGraph::estimate(int64_t index, Pose* pose) const {
   size_t pos;
   if (!impl_->find(index, &pos)) return false;
   *pose = impl_->poseFromState(impl_->x[pos], impl_->kfs[pos]);
   return true;
 }
 
-std::vector<TrajectoryPoint> PoseGraph::trajectory() const {
+std::vector<TrajectoryPoint> KeyframeGraph::trajectory() const {
   const Impl& m = *impl_;
   std::vector<TrajectoryPoint> out(m.kfs.size());
   for (size_t p = 0; p < m.kfs.size(); ++p) {
@@ -1026,13 +1026,13 @@ std::vector<TrajectoryPoint> PoseGraph::trajectory() const {
   return out;
 }
 
-double PoseGraph::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+double KeyframeGraph::innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const {
   return impl_->innovation(c, qpos, mpos);
 }
 
-double PoseGraph::pathLength(size_t from, size_t to) const { return impl_->pathLength(from, to); }
+double KeyframeGraph::pathLength(size_t from, size_t to) const { return impl_->pathLength(from, to); }
 
-TrialSolution PoseGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandidate* candidate,
+TrialSolution KeyframeGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandidate* candidate,
                                      bool robust_candidate, int max_iterations, double time_budget_ms) {
   const auto start = Clock::now();
   Impl& m = *impl_;
@@ -1085,7 +1085,7 @@ TrialSolution PoseGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandida
   return out;
 }
 
-int PoseGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* before,
+int KeyframeGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* before,
                                Eigen::Matrix3Xd* after) const {
   const Impl& m = *impl_;
   std::vector<size_t> scored;
@@ -1103,9 +1103,9 @@ int PoseGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* 
   return static_cast<int>(scored.size());
 }
 
-void PoseGraph::adopt(const TrialSolution& solution) { impl_->adopt(solution.positions, solution.states); }
+void KeyframeGraph::adopt(const TrialSolution& solution) { impl_->adopt(solution.positions, solution.states); }
 
-BatchSolveResult PoseGraph::solveLikeLoopFusion(int max_iterations) const {
+BatchSolveResult KeyframeGraph::solveLikeLoopFusion(int max_iterations) const {
   Impl& m = *impl_;
   BatchSolveResult r;
   r.poses.resize(m.kfs.size());
@@ -1131,9 +1131,9 @@ BatchSolveResult PoseGraph::solveLikeLoopFusion(int max_iterations) const {
   return r;
 }
 
-size_t PoseGraph::solveCount() const { return impl_->solves; }
+size_t KeyframeGraph::solveCount() const { return impl_->solves; }
 
-bool PoseGraph::relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
+bool KeyframeGraph::relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
                                    Eigen::Matrix4d* covariance, int* anchors) const {
   const Impl& m = *impl_;
   if (!m.fourDof() || match_pos >= m.kfs.size() || query_pos >= m.kfs.size()) return false;
@@ -1153,9 +1153,9 @@ bool PoseGraph::relativeCovariance(size_t match_pos, size_t query_pos, double va
   return cg.marginal(gm, gq, Rm, covariance);
 }
 
-Eigen::Matrix4d PoseGraph::loopCovariance() const { return impl_->loopCovariance(); }
+Eigen::Matrix4d KeyframeGraph::loopCovariance() const { return impl_->loopCovariance(); }
 
-bool PoseGraph::chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* cov) const {
+bool KeyframeGraph::chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* cov) const {
   const Impl& m = *impl_;
   if (from > to || to >= m.kfs.size() || m.kfs[from].segment != m.kfs[to].segment) return false;
   if (from == to) {
@@ -1168,15 +1168,15 @@ bool PoseGraph::chainCovariance(size_t from, size_t to, double variance_scale, E
   return true;
 }
 
-int PoseGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
+int KeyframeGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
 
-bool PoseGraph::estimateAt(size_t position, Pose* pose) const {
+bool KeyframeGraph::estimateAt(size_t position, Pose* pose) const {
   if (position >= impl_->kfs.size()) return false;
   *pose = impl_->poseFromState(impl_->x[position], impl_->kfs[position]);
   return true;
 }
 
-Eigen::Vector4d PoseGraph::innovationVector(const LoopCandidate& c, size_t qpos, size_t mpos) const {
+Eigen::Vector4d KeyframeGraph::innovationVector(const LoopCandidate& c, size_t qpos, size_t mpos) const {
   const Impl& m = *impl_;
   const KeyframeState& xm = m.x[mpos];
   const KeyframeState& xq = m.x[qpos];
@@ -1188,7 +1188,7 @@ Eigen::Vector4d PoseGraph::innovationVector(const LoopCandidate& c, size_t qpos,
   return nu;
 }
 
-Status PoseGraph::updateEstimate(size_t position, double variance_scale) {
+Status KeyframeGraph::updateEstimate(size_t position, double variance_scale) {
   Impl& m = *impl_;
   if (!m.fourDof()) return Status::Error("updateEstimate: 4-DoF only");
   if (position >= m.kfs.size()) return Status::Error("updateEstimate: unknown position");
@@ -1208,7 +1208,7 @@ Status PoseGraph::updateEstimate(size_t position, double variance_scale) {
   return Status::Ok();
 }
 
-Status PoseGraph::removeLoop(int64_t query_index, int64_t match_index) {
+Status KeyframeGraph::removeLoop(int64_t query_index, int64_t match_index) {
   Impl& m = *impl_;
   size_t qpos = 0, mpos = 0;
   if (!m.find(query_index, &qpos) || !m.find(match_index, &mpos))

@@ -55,16 +55,16 @@ struct BatchSolveResult {
   std::vector<Pose> poses;  ///< one per keyframe, in trajectory() order
 };
 
-class PoseGraph {
+class KeyframeGraph {
  public:
   /// Reads mode, odometry_neighbours, loop_huber, function_tolerance, quaternion_tolerance,
   /// window_margin, max_relative_translation, max_relative_yaw, anchor_incoming_keyframes,
   /// max_keyframe_jump, max_stamp_jump and jump_confirmations. The config is used as given
   /// (validate it first).
-  explicit PoseGraph(const VerifierConfig& config = VerifierConfig());
-  ~PoseGraph();
-  PoseGraph(const PoseGraph&) = delete;
-  PoseGraph& operator=(const PoseGraph&) = delete;
+  explicit KeyframeGraph(const VerifierConfig& config = VerifierConfig());
+  ~KeyframeGraph();
+  KeyframeGraph(const KeyframeGraph&) = delete;
+  KeyframeGraph& operator=(const KeyframeGraph&) = delete;
 
   const VerifierConfig& config() const { return config_; }
 

@@ -129,7 +129,7 @@ struct LoopDecision {
 };
 const char* toString(LoopDecision::Kind kind);  // "release", "drop", "revoke"
 
-/// One keyframe of a trajectory, as reported by Verifier::trajectory(), PoseGraph::trajectory()
+/// One keyframe of a trajectory, as reported by Verifier::trajectory(), KeyframeGraph::trajectory()
 /// and the plugins.
 struct TrajectoryPoint {
   int64_t index = -1;

@@ -57,7 +57,7 @@ class Verifier {
   const VerifierConfig& config() const { return config_; }
   const std::string& configError() const { return config_error_; }
 
-  /// Registers a keyframe (PoseGraph::addKeyframe: the rules, the plausibility limits and the
+  /// Registers a keyframe (KeyframeGraph::addKeyframe: the rules, the plausibility limits and the
   /// recovery from a jump). Refused input leaves the graph unchanged; ok with a message is a
   /// warning for the host's log.
   Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
@@ -80,7 +80,7 @@ class Verifier {
   /// that update of X), otherwise to convergence.
   /// A first loop between two sequences anchors the query's sequence to the match's frame
   /// exactly as loop_fusion shifts it (w_r_vio / w_t_vio). (A graph that only collects loops,
-  /// solved once at the end: PoseGraph::addLoop.)
+  /// solved once at the end: KeyframeGraph::addLoop.)
   Status commit(const LoopCandidate& candidate);
 
   size_t keyframeCount() const;
@@ -136,7 +136,7 @@ class Verifier {
   std::string config_error_;  // before config_: the constructor validates first
   VerifierConfig config_;
   mutable std::mutex mutex_;
-  PoseGraph graph_;
+  KeyframeGraph graph_;
   Pending pending_;
   double drift_scale_ = 1.0;
   std::vector<CalibrationSample> calibration_;

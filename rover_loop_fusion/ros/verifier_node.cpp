@@ -109,7 +109,7 @@ bool VerifierNode::start(std::string* error) {
   g.max_keyframe_jump = core::findParameter("max_keyframe_jump")->max;
   g.max_stamp_jump = core::findParameter("max_stamp_jump")->max;
   g.jump_confirmations = static_cast<int>(core::findParameter("jump_confirmations")->min);
-  graph_.reset(new core::PoseGraph(g));
+  graph_.reset(new core::KeyframeGraph(g));
 
   odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
   pose_graph_path_pub_ = pnh_.advertise<nav_msgs::Path>("pose_graph_path", 1, true);

@@ -157,7 +157,7 @@ class VerifierNode {
   VerifierNodeParams params_;
   /// loop_fusion's pose graph: every keyframe and the loops this node accepted, whatever the
   /// plugin; solved like loop_fusion (solveLikeLoopFusion) for ~pose_graph_path.
-  std::unique_ptr<core::PoseGraph> graph_;
+  std::unique_ptr<core::KeyframeGraph> graph_;
   ros::Subscriber keyframe_sub_, candidate_sub_;
   ros::Publisher odometry_path_pub_, pose_graph_path_pub_, estimate_path_pub_;
   ros::ServiceServer optimize_srv_;

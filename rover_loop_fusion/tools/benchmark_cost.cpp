@@ -13,7 +13,7 @@
 // 500 m. Every verify() is timed from the call to the verdict, with the verifier's shipped
 // time budget (--time-budget-ms, 0 lifts it) so that time_budget_exceeded is counted.
 //
-// loop_fusion's full optimisation: PoseGraph::solveLikeLoopFusion(5) (the whole graph from
+// loop_fusion's full optimisation: KeyframeGraph::solveLikeLoopFusion(5) (the whole graph from
 // the earliest loop, initialised from VIO, 5 iterations, as optimize4DoF/6DoF after every
 // loop) on a stand-in graph with the same keyframes and loops plus the last true candidate of
 // the longest span, timed in the same process right after the verifications (median of
@@ -276,7 +276,7 @@ int runGraph(const Options& o, const GraphPlan& p) {
 
   // loop_fusion's stand-in: the same keyframes and loops, plus the last true candidate of the
   // longest span (loop_fusion optimises after accepting a loop).
-  core::PoseGraph lf(cfg);
+  core::KeyframeGraph lf(cfg);
   for (const sim::SimKeyframe& kf : s.keyframes) lf.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q);
   for (const core::LoopCandidate& c : committed) lf.addLoop(c);
   for (auto it = results.rbegin(); it != results.rend(); ++it) {

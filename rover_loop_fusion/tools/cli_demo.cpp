@@ -74,7 +74,7 @@ int main(int argc, char** argv) {
 
   const sim::Scene s = sim::makeLapsScene(opt);
   core::Verifier verifier(cfg);
-  core::PoseGraph accept_all(cfg);  // what loop_fusion does without us: every candidate is used
+  core::KeyframeGraph accept_all(cfg);  // what loop_fusion does without us: every candidate is used
   int tp = 0, fp = 0, tn = 0, fn = 0;
   size_t next = 0;
   std::printf("scene %s: %zu keyframes, %zu candidates (%d laps, sigma_t %.3f m, sigma_yaw %.4f rad)\n",

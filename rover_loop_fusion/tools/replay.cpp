@@ -160,7 +160,7 @@ int main(int argc, char** argv) {
   std::map<int64_t, double> stamp_of;
 
   core::Verifier verifier(cfg);
-  core::PoseGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
+  core::KeyframeGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
   int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0;
   size_t verified = 0;
   double verify_ms = 0.0;

@@ -1,4 +1,4 @@
-// core::PoseGraph on its own: loop_fusion's stand-in graph (rover_verifier_node's ~pose_graph_path,
+// core::KeyframeGraph on its own: loop_fusion's stand-in graph (rover_verifier_node's ~pose_graph_path,
 // rover_replay's accept-all baseline) collects loops without solving and solves once, like
 // loop_fusion, to the same result as a verifier that committed the same loops.
 #include "rover_loop_fusion/core/pose_graph.h"
@@ -20,9 +20,9 @@ sim::Scene corridor() {
 
 }  // namespace
 
-TEST(PoseGraph, StandInCollectsLoopsAndSolvesLikeLoopFusionOnce) {
+TEST(KeyframeGraph, StandInCollectsLoopsAndSolvesLikeLoopFusionOnce) {
   const sim::Scene s = corridor();
-  core::PoseGraph graph;
+  core::KeyframeGraph graph;
   core::Verifier verifier;
   for (const sim::SimKeyframe& kf : s.keyframes) {
     ASSERT_TRUE(graph.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
@@ -53,9 +53,9 @@ TEST(PoseGraph, StandInCollectsLoopsAndSolvesLikeLoopFusionOnce) {
   EXPECT_LT(sim::ate(a.poses, truth), 0.7 * sim::ate(vio, truth));
 }
 
-TEST(PoseGraph, AddLoopRefusesWhatCannotBeAnEdge) {
+TEST(KeyframeGraph, AddLoopRefusesWhatCannotBeAnEdge) {
   const sim::Scene s = corridor();
-  core::PoseGraph graph;
+  core::KeyframeGraph graph;
   for (const sim::SimKeyframe& kf : s.keyframes) ASSERT_TRUE(graph.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
   core::LoopCandidate c = s.candidates.front().candidate;
   ASSERT_TRUE(graph.addLoop(c).ok);

@@ -71,7 +71,7 @@ TEST(AdapterStress, KeyframeThreadOptimisationThreadAndSpinners) {
 
   // loop_fusion's keyframe list and its mutex (m_keyframelist), shared by the two threads.
   std::mutex keyframelist;
-  core::PoseGraph graph;  // the optimisation thread's view: keyframes + used loops
+  core::KeyframeGraph graph;  // the optimisation thread's view: keyframes + used loops
   std::atomic<bool> done(false);
   std::atomic<int> optimisations(0), solves_with_loops(0), mirror_errors(0);
   std::vector<char> has_loop(s.keyframes.size(), 0);
