@@ -198,12 +198,14 @@ class NodeHardening(unittest.TestCase):
             node.stop()
 
     def test_sigint_with_a_backlog_stops_promptly_and_says_what_it_did_not_verify(self):
-        # 1000 keyframes on a line and 400 candidates claiming its ends meet (500 m apart),
+        # 3000 keyframes on a line and 2500 candidates claiming its ends meet (1.5 km apart),
         # with the innovation gate and the time budget off: each trial solve takes a while.
         # After SIGINT the node finishes the verification under way, gives every candidate
-        # it did not decide an invalid_input verdict saying so, logs it and exits. (With 60
-        # candidates a fast run had verified them all before the signal arrived.)
-        n = 400
+        # it did not decide an invalid_input verdict saying so, logs it and exits. (The trial solves
+        # converge in an iteration, a few ms each, and the first verdict can reach the test
+        # late: with 1000 keyframes and 60 or 400 candidates an idle machine had verified them
+        # all before the signal arrived; with 2500 up to about 500 were verified first.)
+        n = 2500
         log = tempfile.NamedTemporaryFile(suffix=".csv", delete=False).name
         os.unlink(log)
         node = Node("sigint", {"candidate_timeout": 600.0, "optimize_period": 0.0, "verdict_log": log,
@@ -213,10 +215,10 @@ class NodeHardening(unittest.TestCase):
             verdicts = Verdicts(node.name)
             self.assertTrue(verdicts.connected())
             kf, cand = publishers(node.name)
-            for i in range(1000):
+            for i in range(3000):
                 kf.publish(keyframe(1.0 + i, 0.5 * i))
             for i in range(n):
-                cand.publish(candidate(1000.0, 1.0 + i))
+                cand.publish(candidate(3000.0, 1.0 + i))
             self.assertTrue(verdicts.wait(1, 120.0), "no verification finished")
             node.proc.send_signal(signal.SIGINT)
             status = node.wait_exit(60.0)
