@@ -7,7 +7,8 @@ the ones a recorded run of VINS-Fusion with the patched loop_fusion holds:
                                   keyframe's stamp, frame "world", pose = the VIO pose
   /loop_fusion/loop_candidates    rover_loop_fusion/LoopCandidate: keyframes named by stamp
                                   (query_index = match_index = -1), relative pose, relative
-                                  yaw [rad], inliers; recorded right after its query keyframe
+                                  yaw [rad] (loop_fusion's: the difference of world yaws,
+                                  geometry.loop_yaw), inliers; recorded right after its query keyframe
 
 The labels stay in the scenario directory next to the bag (candidates.csv: label per
 candidate; groundtruth.csv: ground truth per keyframe; keyframes.csv gives the stamps that
@@ -89,12 +90,14 @@ def scenario_messages(s):
         raise ValueError(f"{s.name}: keyframes of sequences {sorted(sequences)}; a bag for "
                          "rover_verifier_node holds one session (its ~sequence parameter)")
     stamp = {k.index: k.stamp for k in s.keyframes}
+    vio = {k.index: k.T for k in s.keyframes}
     out = [(k.stamp, KEYFRAME_TOPIC, keyframe_msg(k.stamp, k.T)) for k in s.keyframes]
     for c in s.candidates:
         if c.query not in stamp or c.match not in stamp:
             raise ValueError(f"{s.name}: candidate {c.query} -> {c.match} names an unknown keyframe")
         out.append((stamp[c.query] + CANDIDATE_DELAY, CANDIDATE_TOPIC,
-                    candidate_msg(stamp[c.query], stamp[c.match], c.T_rel, c.relative_yaw, c.inliers)))
+                    candidate_msg(stamp[c.query], stamp[c.match], c.T_rel, c.relative_yaw(vio[c.match]),
+                                  c.inliers)))
     out.sort(key=lambda e: e[0])  # stable: a candidate stays after its keyframe
     return out
 
@@ -159,8 +162,9 @@ def malformed_messages(seed=0):
     for i in range(len(kfs)):
         extra = 0.0
         if i == early.query:  # the candidate is recorded before its keyframe
-            cand("before_its_keyframe", st[i], st[early.match], early.T_rel, early.relative_yaw,
-                 st[i] - 0.2, "decided", "waits for its keyframe, then is verified")
+            cand("before_its_keyframe", st[i], st[early.match], early.T_rel,
+                 early.relative_yaw(kfs[early.match].T), st[i] - 0.2, "decided",
+                 "waits for its keyframe, then is verified")
         if i == 20:
             kf(i, T=nan_T)
             why = "NaN position"
@@ -191,8 +195,8 @@ def malformed_messages(seed=0):
         c = by_query.get(i)
         if c is not None and c is not early and not {c.query, c.match} & REFUSED:
             want = "rejected" if c.label == 0 else "decided"
-            cand(f"{'true' if c.label else 'false'}_{i}", st[i], st[c.match], c.T_rel, c.relative_yaw, t,
-                 want, "a regular candidate")
+            cand(f"{'true' if c.label else 'false'}_{i}", st[i], st[c.match], c.T_rel,
+                 c.relative_yaw(kfs[c.match].T), t, want, "a regular candidate")
         # bad candidates, each at its own query keyframe (none of them is a regular one)
         if i == 70:
             cand("unknown_query_stamp", st[i] + 0.25, st[5], T_id, 0.0, t, "invalid_input",

@@ -79,6 +79,15 @@ def wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
+def loop_yaw(R_match, R_rel):
+    """loop_fusion's relative yaw of a loop (loop_info[7], here in radians): the difference of
+    the world yaws of query and match, yaw(R_m R_rel) - yaw(R_m), wrapped; R_match is the match
+    keyframe's VIO rotation, R_rel the query's rotation in the match frame. The 4-DoF graph
+    compares it with yaw_q - yaw_m (core/pose_graph.cpp). It equals yaw_of(R_rel) only when R_m
+    is a pure yaw (a planar body); on a tilted one (EuRoC's IMU) they differ by degrees."""
+    return float(wrap(yaw_of(R_match @ R_rel) - yaw_of(R_match)))
+
+
 def yaw_only(T):
     """The pose with its rotation reduced to the yaw (ZYX): loop_fusion's 4-DoF view of a pose
     whose roll and pitch the VIO keeps."""

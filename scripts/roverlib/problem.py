@@ -100,8 +100,7 @@ def from_scenario(s, model, mode="4dof"):
         if dof == 4:
             R_m = vio[m][:3, :3]
             t = g.rot_z(g.yaw_of(R_m)).T @ (R_m @ c.T_rel[:3, 3])
-            yaw = g.wrap(g.yaw_of(R_m @ c.T_rel[:3, :3]) - g.yaw_of(R_m))
-            T = g.pose(g.rot_z(yaw), t)
+            T = g.pose(g.rot_z(g.loop_yaw(R_m, c.T_rel[:3, :3])), t)
         else:
             T = c.T_rel
         loops.append(Edge(m, q, T, model.loop_covariance(dof), c.label))

@@ -30,9 +30,11 @@ class Candidate:
     inliers: int = -1
     kind: str = ""  # how it was made (revisit, lookalike, random); not written
 
-    @property
-    def relative_yaw(self):
-        return g.yaw_of(self.T_rel[:3, :3])
+    def relative_yaw(self, T_match):
+        """loop_fusion's relative yaw [rad] (loop_info[7]): the difference of world yaws
+        (geometry.loop_yaw), which needs T_match, the match keyframe's VIO pose; not the yaw
+        of T_rel, which differs from it on a tilted body."""
+        return g.loop_yaw(T_match[:3, :3], self.T_rel[:3, :3])
 
 
 @dataclass
@@ -42,6 +44,14 @@ class Scenario:
     candidates: List[Candidate]
     truth: Optional[List[np.ndarray]] = None  # per keyframe, same order
     meta: dict = field(default_factory=dict)  # mode, alignment, threshold hints, provenance
+
+    def relative_yaws(self):
+        """loop_fusion's relative yaw [rad] of each candidate, in candidate order."""
+        vio = {k.index: k.T for k in self.keyframes}
+        unknown = [c.match for c in self.candidates if c.match not in vio]
+        if unknown:
+            raise ValueError(f"{self.name}: candidates name unknown match keyframes {sorted(set(unknown))[:5]}")
+        return [c.relative_yaw(vio[c.match]) for c in self.candidates]
 
 
 def _tq(T):
@@ -58,9 +68,9 @@ def write(s: Scenario, directory: str):
                              [f"{v:.9f}" for v in _tq(k.T)]) + "\n")
     with open(os.path.join(directory, "candidates.csv"), "w") as f:
         f.write(CANDIDATES_HEADER + "\n")
-        for c in sorted(s.candidates, key=lambda c: c.query):
+        for c, yaw in sorted(zip(s.candidates, s.relative_yaws()), key=lambda e: e[0].query):
             f.write(",".join([str(c.query), str(c.match)] + [f"{v:.9f}" for v in _tq(c.T_rel)] +
-                             [f"{c.relative_yaw:.9f}", str(c.inliers), str(c.label)]) + "\n")
+                             [f"{yaw:.9f}", str(c.inliers), str(c.label)]) + "\n")
     if s.truth is not None:
         with open(os.path.join(directory, "groundtruth.csv"), "w") as f:
             f.write(TRUTH_HEADER + "\n")

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import ROOT, tilted_loop_scenario
 from roverlib import bag, geometry as g, real_data, scenario, scenes
 
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
@@ -47,11 +47,21 @@ def test_bag_holds_the_scenario_in_replay_order(tmp_path):
         assert m.query_stamp == m.header.stamp == bag.ros_time(stamp[c.query])
         assert m.match_stamp == bag.ros_time(stamp[c.match])
         assert np.allclose(pose_of(m.relative_pose), c.T_rel, atol=1e-12)
-        assert m.relative_yaw == pytest.approx(c.relative_yaw)
+        assert m.relative_yaw == pytest.approx(c.relative_yaw(s.keyframes[c.match].T))
         assert m.inliers == c.inliers
         # recorded right after its query keyframe, before the next one
         assert last_keyframe[id(m)] == m.query_stamp
         assert t > m.query_stamp
+
+
+def test_candidate_message_yaw_is_loop_fusions_on_a_tilted_body():
+    """The candidate message's relative_yaw is loop_fusion's (the difference of world yaws), as
+    candidates.csv's; on this tilted body the relative rotation's yaw is 9 deg away from it."""
+    s, c = tilted_loop_scenario()
+    (m,) = [m for _, topic, m in bag.scenario_messages(s) if topic == bag.CANDIDATE_TOPIC]
+    world = g.wrap(g.yaw_of(s.truth[c.query][:3, :3]) - g.yaw_of(s.truth[c.match][:3, :3]))
+    assert m.relative_yaw == pytest.approx(world, abs=1e-12)
+    assert abs(m.relative_yaw - g.yaw_of(c.T_rel[:3, :3])) > np.radians(5.0)
 
 
 def test_same_seed_same_bytes(tmp_path):

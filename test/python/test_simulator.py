@@ -1,12 +1,13 @@
 """The scenario simulator: labels agree with the ground truth, files round-trip, the C++
 reader (rover_replay) reads what Python writes, and real-data scenarios load."""
+import csv
 import os
 import subprocess
 
 import numpy as np
 import pytest
 
-from conftest import ROOT, built_tool
+from conftest import ROOT, built_tool, tilted_loop_scenario
 from roverlib import geometry as g
 from roverlib import real_data, scenario, scenes
 
@@ -69,6 +70,32 @@ def test_replay_reads_what_python_writes(tmp_path):
               "groundtruth.tum"):
         lines = (tmp_path / "out" / f).read_text().strip().splitlines()
         assert len(lines) == len(s.keyframes), f
+
+
+def test_relative_yaw_is_loop_fusions_on_a_tilted_body(tmp_path):
+    """candidates.csv's relative_yaw is loop_fusion's loop_info[7], the difference of world
+    yaws, which the core compares with yaw_q - yaw_m (core/pose_graph.cpp), not the yaw of the
+    relative rotation: on a tilted body an exact loop then has zero innovation, and chi2 accepts
+    it (with the relative rotation's yaw it was 9 deg off, d^2 48 > 18.5: rejected)."""
+    s, c = tilted_loop_scenario()
+    R_m, R_q = s.truth[c.match][:3, :3], s.truth[c.query][:3, :3]
+    world = g.wrap(g.yaw_of(R_q) - g.yaw_of(R_m))
+    assert abs(np.degrees(world - g.yaw_of(c.T_rel[:3, :3]))) > 5.0, "the two conventions differ here"
+    scenario.write(s, str(tmp_path / "scn"))
+    rows = (tmp_path / "scn" / "candidates.csv").read_text().splitlines()
+    assert float(rows[1].split(",")[9]) == pytest.approx(world, abs=1e-8)
+    tool = built_tool("rover_replay")
+    for decision in ("chi2", "metric"):
+        subprocess.run([tool, "--scenario", str(tmp_path / "scn"), "--out", str(tmp_path / decision),
+                        "--decision", decision, "--quiet"], capture_output=True, check=True)
+        v = _csv(tmp_path / decision / "verdicts.csv")
+        assert len(v) == 1 and v[0]["reason"] == "accepted", (decision, v)
+        assert float(v[0]["score"]) < 1e-6, (decision, v)
+
+
+def _csv(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
 
 
 def test_real_euroc_scenario():
