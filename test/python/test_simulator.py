@@ -93,6 +93,20 @@ def test_relative_yaw_is_loop_fusions_on_a_tilted_body(tmp_path):
         assert float(v[0]["score"]) < 1e-6, (decision, v)
 
 
+def test_replay_prints_no_precision_when_nothing_was_accepted(tmp_path):
+    # A gate of 1e-9 m rejects every candidate: precision of no accepted loop is "-", never 1.0.
+    tool = built_tool("rover_replay")
+    s = scenes.make_scene("corridor", 0.03, seed=4, n_true=10, n_false=10)
+    scenario.write(s, str(tmp_path / "scn"))
+    out = subprocess.run([tool, "--scenario", str(tmp_path / "scn"), "--out", str(tmp_path / "out"),
+                          "--max_innovation", "1e-9", "--max_innovation_per_metre", "0", "--quiet"],
+                         capture_output=True, text=True, check=True).stdout
+    line = next(l for l in out.splitlines() if " TP " in l)
+    assert "TP 0 FP 0" in line, line
+    assert line.split("precision ")[1].split()[0] == "-", line
+    assert line.split("recall ")[1].split()[0] == "0.000", line
+
+
 def _csv(path):
     with open(path) as f:
         return list(csv.DictReader(f))
