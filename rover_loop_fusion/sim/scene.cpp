@@ -4,6 +4,7 @@
 #include "rover_loop_fusion/core/geometry.h"
 
 #include <cmath>
+#include <cstdio>
 
 namespace rover_loop_fusion {
 namespace sim {
@@ -130,6 +131,13 @@ double ate(const std::vector<Pose>& estimate, const std::vector<Pose>& truth, bo
     T.col(i) = truth[i].t;
   }
   return core::alignPositions(T, E, with_scale).rmse;
+}
+
+std::string ratioText(int num, int den) {
+  if (den == 0) return "-";
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.3f", static_cast<double>(num) / den);
+  return buf;
 }
 
 }  // namespace sim

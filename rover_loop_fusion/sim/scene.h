@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace rover_loop_fusion {
@@ -70,6 +71,10 @@ core::Pose compose(const core::Pose& a, const core::Pose& b);
 /// ATE RMSE of positions after SE(3) (or Sim(3)) alignment.
 double ate(const std::vector<core::Pose>& estimate, const std::vector<core::Pose>& truth,
            bool with_scale = false);
+
+/// num / den with three decimals, or "-" when den is 0 (precision of no accepted loop, recall
+/// without a true loop: no decision to take it from, never 1.0).
+std::string ratioText(int num, int den);
 
 }  // namespace sim
 }  // namespace rover_loop_fusion

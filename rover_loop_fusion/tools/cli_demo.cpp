@@ -114,13 +114,12 @@ int main(int argc, char** argv) {
   }
   const core::BatchSolveResult lf_all = accept_all.solveLikeLoopFusion(5);
   const core::BatchSolveResult lf_verified = verifier.solveLikeLoopFusion(5);
-  const double precision = tp + fp > 0 ? static_cast<double>(tp) / (tp + fp) : 1.0;
-  const double recall = tp + fn > 0 ? static_cast<double>(tp) / (tp + fn) : 0.0;
   std::printf("\nsummary: %d candidates (%d true, %d false): accepted %d, rejected %d\n",
               tp + fp + tn + fn, tp + fn, fp + tn, tp + fp, tn + fn);
   std::printf("  true positives %d, false positives %d, true negatives %d, false negatives %d\n", tp,
               fp, tn, fn);
-  std::printf("  precision %.3f, recall %.3f (threshold %.2f m)\n", precision, recall, cfg.threshold);
+  std::printf("  precision %s, recall %s (threshold %.2f m)\n", sim::ratioText(tp, tp + fp).c_str(),
+              sim::ratioText(tp, tp + fn).c_str(), cfg.threshold);
   std::printf("  ATE [m]: odometry %.3f | accept-all (loop_fusion) %.3f | verified (loop_fusion) %.3f | verifier estimate %.3f\n",
               sim::ate(odom, truth), sim::ate(lf_all.poses, truth), sim::ate(lf_verified.poses, truth),
               sim::ate(estimates(verifier), truth));

@@ -35,6 +35,7 @@
 #include "rover_loop_fusion/core/verdict_csv.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scenario_io.h"
+#include "rover_loop_fusion/sim/scene.h"
 
 #include <sys/stat.h>
 
@@ -298,17 +299,9 @@ int main(int argc, char** argv) {
   }
   std::printf("rover_replay: %zu keyframes (%d refused), %zu candidates, protocol %s, threshold %.2f m\n",
               stamps.size(), refused_keyframes, verified, protocol.c_str(), cfg.threshold);
-  if (tp + fp + tn + fn > 0) {
-    // A ratio of nothing is "-": precision without an accepted loop, recall without a true one.
-    auto ratio = [](int num, int den) {
-      char buf[32];
-      if (den == 0) return std::string("-");
-      std::snprintf(buf, sizeof(buf), "%.3f", double(num) / den);
-      return std::string(buf);
-    };
+  if (tp + fp + tn + fn > 0)
     std::printf("rover_replay: TP %d FP %d TN %d FN %d  precision %s recall %s\n", tp, fp, tn, fn,
-                ratio(tp, tp + fp).c_str(), ratio(tp, tp + fn).c_str());
-  }
+                sim::ratioText(tp, tp + fp).c_str(), sim::ratioText(tp, tp + fn).c_str());
   std::printf("rover_replay: mean verification %.3f ms; output in %s\n",
               verified ? verify_ms / verified : 0.0, out_dir.c_str());
   return 0;
