@@ -57,8 +57,7 @@ CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
   const Eigen::Matrix3d Ra = yawPitchRollToRotation(a.yaw, pitch_[ed.from], roll_[ed.from]);
   const Eigen::Vector3d d = b.p - a.p;
   Linearised L;
-  L.r.head<3>() = Ra.transpose() * d - ed.t;
-  L.r[3] = wrapAngle(b.yaw - a.yaw - ed.yaw);
+  L.r = residual(e);
   L.Ja.setZero();
   L.Jb.setZero();
   L.Ja.topLeftCorner<3, 3>() = -Ra.transpose();

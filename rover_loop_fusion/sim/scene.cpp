@@ -42,17 +42,6 @@ void integrateVio(std::vector<SimKeyframe>& kfs, double sigma_t, double sigma_ya
   }
 }
 
-core::LoopCandidate makeCandidate(const SimKeyframe& query, const SimKeyframe& match,
-                                  const Pose& rel) {
-  core::LoopCandidate c;
-  c.query_index = query.index;
-  c.match_index = match.index;
-  c.relative_t = rel.t;
-  c.relative_q = rel.q;
-  c.relative_yaw = core::yawOf(rel.q);
-  c.inliers = 40;
-  return c;
-}
 
 }  // namespace
 
@@ -103,7 +92,7 @@ Scene makeLapsScene(const LapsOptions& o) {
       rel.t += Eigen::Vector3d(g(o.candidate_sigma_t), g(o.candidate_sigma_t), g(o.candidate_sigma_t));
       rel.q = (core::yawRotation(g(o.candidate_sigma_yaw)) * rel.q).normalized();
       SimCandidate sc;
-      sc.candidate = makeCandidate(kq, scene.keyframes[best], rel);
+      sc.candidate = loopCandidate(kq, scene.keyframes[best], rel, 40);
       sc.is_true = true;
       sc.truth_distance = best_d;
       scene.candidates.push_back(sc);
@@ -114,7 +103,7 @@ Scene makeLapsScene(const LapsOptions& o) {
       rel.t = Eigen::Vector3d(g(0.3), g(0.3), g(0.05));
       rel.q = core::yawRotation(core::wrapAngleDiff(yaw_q - core::yawOf(km.truth.q)) + g(o.candidate_sigma_yaw));
       SimCandidate sc;
-      sc.candidate = makeCandidate(kq, km, rel);
+      sc.candidate = loopCandidate(kq, km, rel, 40);
       sc.is_true = false;
       sc.truth_distance = (km.truth.t - kq.truth.t).norm();
       scene.candidates.push_back(sc);
@@ -131,6 +120,18 @@ double ate(const std::vector<Pose>& estimate, const std::vector<Pose>& truth, bo
     T.col(i) = truth[i].t;
   }
   return core::alignPositions(T, E, with_scale).rmse;
+}
+
+core::LoopCandidate loopCandidate(const SimKeyframe& query, const SimKeyframe& match, const Pose& rel,
+                                  int inliers) {
+  core::LoopCandidate c;
+  c.query_index = query.index;
+  c.match_index = match.index;
+  c.relative_t = rel.t;
+  c.relative_q = rel.q;
+  c.relative_yaw = core::yawOf(rel.q);  // keyframes of sim scenes turn about z only
+  c.inliers = inliers;
+  return c;
 }
 
 std::string ratioText(int num, int den) {

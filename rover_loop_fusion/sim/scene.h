@@ -72,6 +72,11 @@ core::Pose compose(const core::Pose& a, const core::Pose& b);
 double ate(const std::vector<core::Pose>& estimate, const std::vector<core::Pose>& truth,
            bool with_scale = false);
 
+/// The loop candidate "query seen from match at relative pose rel" (rel: query in match's
+/// frame), as loop_fusion would report it.
+core::LoopCandidate loopCandidate(const SimKeyframe& query, const SimKeyframe& match, const core::Pose& rel,
+                                  int inliers = -1);
+
 /// num / den with three decimals, or "-" when den is 0 (precision of no accepted loop, recall
 /// without a true loop: no decision to take it from, never 1.0).
 std::string ratioText(int num, int den);

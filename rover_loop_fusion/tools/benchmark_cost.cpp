@@ -164,17 +164,6 @@ std::vector<GraphPlan> plan(const Options& o) {
   return plans;
 }
 
-core::LoopCandidate candidate(const sim::SimKeyframe& query, const sim::SimKeyframe& match,
-                              const core::Pose& rel) {
-  core::LoopCandidate c;
-  c.query_index = query.index;
-  c.match_index = match.index;
-  c.relative_t = rel.t;
-  c.relative_q = rel.q;
-  c.relative_yaw = core::yawOf(rel.q);
-  return c;
-}
-
 /// A true candidate: the true relative pose with PnP-like noise. A false one: the query seen
 /// at a look-alike place `offset` metres away along x (the track), y (lateral) or z (a floor).
 core::LoopCandidate makeCandidate(const Options& o, const sim::SimKeyframe& query,
@@ -189,7 +178,7 @@ core::LoopCandidate makeCandidate(const Options& o, const sim::SimKeyframe& quer
   }
   rel.t += Eigen::Vector3d(g(o.candidate_sigma_t), g(o.candidate_sigma_t), g(o.candidate_sigma_t));
   rel.q = (core::yawRotation(g(o.candidate_sigma_yaw)) * rel.q).normalized();
-  return candidate(query, match, rel);
+  return sim::loopCandidate(query, match, rel);
 }
 
 /// Went through the whole test: the trial solve (metric decision) or the chi-square test,
@@ -283,7 +272,7 @@ int runGraph(const Options& o, const GraphPlan& p) {
     if (it->is_true && it->span == p.spans.back()) {
       const sim::SimKeyframe& q = s.keyframes[it->verdict.query_index];
       const sim::SimKeyframe& m = s.keyframes[it->verdict.match_index];
-      lf.addLoop(candidate(q, m, sim::relative(m.truth, q.truth)));
+      lf.addLoop(sim::loopCandidate(q, m, sim::relative(m.truth, q.truth)));
       break;
     }
   }

@@ -34,14 +34,7 @@ sim::Scene laps(int n) {
 
 /// A loop between two keyframes at their true relative pose.
 core::LoopCandidate loop(const sim::SimKeyframe& query, const sim::SimKeyframe& match) {
-  const core::Pose rel = sim::relative(match.truth, query.truth);
-  core::LoopCandidate c;
-  c.query_index = query.index;
-  c.match_index = match.index;
-  c.relative_t = rel.t;
-  c.relative_q = rel.q;
-  c.relative_yaw = core::yawOf(rel.q);
-  return c;
+  return sim::loopCandidate(query, match, sim::relative(match.truth, query.truth));
 }
 
 core::VerifierConfig budget(double ms) {
