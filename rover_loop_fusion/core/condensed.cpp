@@ -6,6 +6,7 @@
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
 
+#include <algorithm>
 #include <cmath>
 
 namespace rover_loop_fusion {
@@ -132,29 +133,58 @@ bool CondensedGraph::marginal(int gauge, int query, const Eigen::Matrix3d& frame
   return cov->allFinite() && (*cov)(3, 3) > 0.0;
 }
 
-int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok) {
+int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* converged,
+                          double function_tolerance) {
   *ok = true;
+  if (converged) *converged = false;
   std::vector<int> col(states_.size(), -1);
   int n = 0;
   for (size_t i = 0; i < states_.size(); ++i)
     if (!fixed_[i]) col[i] = n++;
-  if (n == 0) return 0;
+  if (n == 0) {
+    if (converged) *converged = true;
+    return 0;
+  }
   int it = 0;
+  double previous_cost = -1.0;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;  // one ordering: the pattern stays
   for (it = 1; it <= max_iterations; ++it) {
     std::vector<Eigen::Triplet<double>> trip;
     trip.reserve(edges_.size() * 64);
     Eigen::VectorXd g = Eigen::VectorXd::Zero(4 * n);
+    double cost = 0.0;
     for (size_t e = 0; e < edges_.size(); ++e) {
-      const Linearised L = linearise(e);
+      Linearised L = linearise(e);
+      const CondensedEdge& ed = edges_[e];
+      const double chi2 = L.r.squaredNorm();
+      cost += chi2;
+      if (ed.huber > 0) {  // IRLS: the Huber loss's rho'(s) = delta / sqrt(s) beyond delta^2
+        const int count = std::max(1, ed.count);
+        const double s = chi2 / count;
+        if (s > ed.huber * ed.huber) {
+          cost += count * (2.0 * ed.huber * std::sqrt(s) - ed.huber * ed.huber) - chi2;
+          const double w = std::sqrt(ed.huber / std::sqrt(s));
+          L.r *= w;
+          L.Ja *= w;
+          L.Jb *= w;
+        }
+      }
       const Eigen::Matrix4d* J[2] = {&L.Ja, &L.Jb};
-      const int c[2] = {col[edges_[e].from], col[edges_[e].to]};
+      const int c[2] = {col[ed.from], col[ed.to]};
       for (int u = 0; u < 2; ++u)
         if (c[u] >= 0) g.segment<4>(4 * c[u]) += J[u]->transpose() * L.r;
       addHessianBlocks(J, c, &trip);
     }
+    if (function_tolerance > 0 && previous_cost >= 0 &&
+        std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
+      if (converged) *converged = true;
+      return it - 1;  // this iteration's update is not needed
+    }
+    previous_cost = cost;
     Eigen::SparseMatrix<double> H(4 * n, 4 * n);
     H.setFromTriplets(trip.begin(), trip.end());
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(H);
+    if (it == 1) ldlt.analyzePattern(H);
+    ldlt.factorize(H);
     if (ldlt.info() != Eigen::Success) {
       *ok = false;
       return it;
@@ -169,7 +199,10 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok) {
       states_[i].p += dx.segment<3>(4 * col[i]);
       states_[i].yaw = wrapAngle(states_[i].yaw + dx[4 * col[i] + 3]);
     }
-    if (dx.cwiseAbs().maxCoeff() < tolerance) break;
+    if (dx.cwiseAbs().maxCoeff() < tolerance) {
+      if (converged) *converged = true;
+      break;
+    }
   }
   return std::min(it, max_iterations);
 }

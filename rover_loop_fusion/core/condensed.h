@@ -35,6 +35,11 @@ struct CondensedEdge {
   Eigen::Vector3d t = Eigen::Vector3d::Zero();  ///< measured position of `to` in `from`'s frame
   double yaw = 0.0;                              ///< measured yaw of `to` minus yaw of `from`
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Identity();
+  /// Robust edge (solve() only): Huber loss of this scale on the chi-square of each of the
+  /// `count` measurements the edge stands for (loops merged into one edge: covariance / count),
+  /// as Ceres' HuberLoss on loop_fusion's loop residuals. 0 = none.
+  double huber = 0.0;
+  int count = 1;
 };
 
 class CondensedGraph {
@@ -57,10 +62,14 @@ class CondensedGraph {
   /// the linear system is singular (query not tied to the gauge).
   bool marginal(int gauge, int query, const Eigen::Matrix3d& frame, Eigen::Matrix4d* cov) const;
 
-  /// Gauss-Newton on the free anchors; returns iterations run. Stops when the largest update
+  /// Gauss-Newton on the free anchors (robust edges by iteratively reweighted least squares);
+  /// returns iterations run. Stops when the largest update
   /// is below `tolerance` or after `max_iterations`. False in *ok if the system was singular or
   /// the solution not finite (states then unchanged since the last good iterate).
-  int solve(int max_iterations, double tolerance, bool* ok);
+  /// Also stops when the cost changed by less than `function_tolerance` of itself in an
+  /// iteration (as Ceres; 0: never). *converged (optional): whether it stopped on a tolerance.
+  int solve(int max_iterations, double tolerance, bool* ok, bool* converged = nullptr,
+            double function_tolerance = 0.0);
 
  private:
   struct Linearised {

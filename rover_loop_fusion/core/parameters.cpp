@@ -142,6 +142,12 @@ std::vector<Parameter> makeTable() {
                       "give the candidate the Huber loss too (experiments only)"));
   t.push_back(integer("window_margin", "keyframes", &C::window_margin, 0, 10000,
                       "keyframes before the match also optimised and scored"));
+  t.push_back(integer("condense_min_window", "keyframes", &C::condense_min_window, 0, 100000000,
+                      "4-DoF: trials over more keyframes than this are solved on the condensed graph "
+                      "(bounded cost); 0: always the full window"));
+  t.push_back(integer("trial_loop_anchors", "", &C::trial_loop_anchors, 2, 100000,
+                      "accepted loops (revisits merged, then older ones thinned) at most in a condensed trial: "
+                      "bounds its cost"));
   // Plausibility of the input.
   t.push_back(number("max_relative_translation", "m", &C::max_relative_translation, 0.0, 100.0, true,
                      "candidates with a longer relative translation are invalid input"));

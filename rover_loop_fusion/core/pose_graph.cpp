@@ -14,6 +14,7 @@
 #include <map>
 #include <queue>
 #include <sstream>
+#include <tuple>
 
 namespace rover_loop_fusion {
 namespace core {
@@ -165,6 +166,8 @@ struct KeyframeGraph::Impl {
   struct SequenceChain {
     size_t start = 0;
     ChainMoments moments;
+    /// The same with loop_fusion's unit weighting (condensed trials, condense_min_window only).
+    ChainMoments unit;
   };
   std::map<int, SequenceChain> chains;
   DriftModel drift;
@@ -259,22 +262,48 @@ struct KeyframeGraph::Impl {
   Eigen::Matrix4d loopCovariance() const;
   /// The accepted loops of a component as condensed-graph edges: loops of one revisit within
   /// kMergeKeyframes (query and match) merged into one edge with the information of all;
-  /// beyond max_loop_anchors, the newest half kept and the older thinned evenly.
+  /// beyond the cap, the newest half kept and the older thinned evenly.
   struct LoopRep {
     size_t from, to;
     const LoopCandidate* loop;
     int count;
   };
-  std::vector<LoopRep> loopReps(int component) const;
-  std::vector<LoopRep> computeLoopReps(int component) const;
+  /// `cap` loops at most (max_loop_anchors or trial_loop_anchors); loops ending before `first`
+  /// left out first.
+  std::vector<LoopRep> loopReps(int component, size_t first, int cap) const;
+  std::vector<LoopRep> computeLoopReps(int component, size_t first, int cap) const;
   /// loopReps() of the last revision asked (they change only when the loops do).
   mutable uint64_t reps_revision = ~uint64_t(0);
-  mutable std::map<int, std::vector<LoopRep>> reps_cache;
+  mutable std::map<std::tuple<int, size_t, int>, std::vector<LoopRep>> reps_cache;
   /// The condensed graph of a component on the loop ends plus `extra` positions, states from
   /// X; sequence 0 held fixed. Fills `anchors` (positions, increasing). False if an edge's
   /// covariance was unusable.
-  bool condense(int component, const std::vector<size_t>& extra, double variance_scale,
+  struct CondenseOptions {
+    double variance_scale = 1.0;  ///< drift model variances times this
+    /// A condensed trial over the window [first, newest] (`first` in the component): loop_fusion's
+    /// weighting (unit moments, loop edges with the loop yaw weight and the Huber loss) instead
+    /// of the drift model's; anchors up to `first` held fixed, only loops that end after it.
+    bool trial = false;
+    size_t first = 0;
+  };
+  bool condense(int component, const std::vector<size_t>& extra, const CondenseOptions& options,
                 CondensedGraph* cg, std::vector<size_t>* anchors) const;
+  /// loop_fusion's unit weighting as covariances: of a loop edge, and of one odometry step of a
+  /// chain with odometry_neighbours edges per keyframe (a uniform strain e stretches the edge to
+  /// the k-th neighbour by k e: stiffness sum k^2 per step). Yaw residuals are in degrees.
+  Eigen::Matrix4d unitLoopCovariance() const;
+  Eigen::Matrix4d unitStepCovariance() const;
+  bool condensesTrials() const { return fourDof() && cfg.condense_min_window > 0 && cfg.odometry_neighbours >= 1; }
+  /// The condensed trial (solveWindow); false if it could not be built or solved.
+  bool solveCondensed(size_t first, int component, size_t mpos, size_t qpos, const LoopCandidate* candidate,
+                      bool robust_candidate, int max_iterations, TrialSolution* out) const;
+  /// New states of `targets` (window positions of the component, increasing) under a condensed
+  /// solution: between two anchors of a segment the chain's conditional mean (as the linear
+  /// solve places them), before the first and after the last anchor rigidly with it.
+  std::vector<KeyframeState> expand(const TrialSolution& s, const std::vector<size_t>& targets) const;
+  /// The window positions of a condensed solution's component (every `stride`-th, increasing).
+  std::vector<size_t> windowPositions(const TrialSolution& s, size_t stride, bool skip_fixed_map) const;
+  size_t windowCount(const TrialSolution& s, bool skip_fixed_map) const;
   int componentOf(size_t pos) const;
   /// Carries new anchor states to every keyframe of the component: chains between anchors by
   /// the chain model's conditional mean, the ends rigidly with their anchor.
@@ -654,6 +683,9 @@ constexpr size_t kMergeKeyframes = 10;
 /// A commit re-places the keyframes of a chain only if one of its ends moved more than this.
 constexpr double kSpreadTranslation = 1e-4;  // m
 constexpr double kSpreadYaw = 1e-6;          // rad
+/// A condensed trial has converged when no anchor moves by more than this in an iteration
+/// (metres; radians for yaw).
+constexpr double kCondensedTolerance = 1e-6;
 }  // namespace
 
 void KeyframeGraph::Impl::appendMoments(size_t pos) {
@@ -666,6 +698,7 @@ void KeyframeGraph::Impl::appendMoments(size_t pos) {
   SequenceChain& ch = it->second;
   const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
   ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(), drift.stepCovariance(length));
+  if (condensesTrials()) ch.unit.append(kf.vio.t, kf.vio.q.toRotationMatrix(), unitStepCovariance());
 }
 
 void KeyframeGraph::Impl::rebuildMoments(int sequence) {
@@ -673,6 +706,7 @@ void KeyframeGraph::Impl::rebuildMoments(int sequence) {
     if (kfs[kv.second.start].sequence != sequence) continue;
     const size_t start = kv.second.start, n = kv.second.moments.size();
     kv.second.moments.clear();
+    kv.second.unit.clear();
     for (size_t p = start; p < start + n; ++p) appendMoments(p);
   }
 }
@@ -684,6 +718,21 @@ Eigen::Matrix4d KeyframeGraph::Impl::loopCovariance() const {
   return C;
 }
 
+Eigen::Matrix4d KeyframeGraph::Impl::unitLoopCovariance() const {
+  Eigen::Matrix4d C = Eigen::Matrix4d::Identity();
+  const double yaw = 1.0 / (kYawResidualScale * kLoopYawWeight);
+  C(3, 3) = yaw * yaw;
+  return C;
+}
+
+Eigen::Matrix4d KeyframeGraph::Impl::unitStepCovariance() const {
+  double stiffness = 0.0;
+  for (int k = 1; k <= cfg.odometry_neighbours; ++k) stiffness += k * k;
+  Eigen::Matrix4d C = Eigen::Matrix4d::Identity() / stiffness;
+  C(3, 3) /= kYawResidualScale * kYawResidualScale;
+  return C;
+}
+
 int KeyframeGraph::Impl::componentOf(size_t pos) const {
   int s = kfs[pos].segment;
   for (auto it = seg_parent.find(s); it != seg_parent.end() && it->second != s; it = seg_parent.find(s))
@@ -691,20 +740,25 @@ int KeyframeGraph::Impl::componentOf(size_t pos) const {
   return s;
 }
 
-std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::loopReps(int component) const {
+std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::loopReps(int component, size_t first, int cap) const {
   if (reps_revision != revision) {
     reps_cache.clear();
     reps_revision = revision;
   }
-  auto it = reps_cache.find(component);
-  if (it == reps_cache.end()) it = reps_cache.emplace(component, computeLoopReps(component)).first;
+  const auto key = std::make_tuple(component, first, cap);
+  auto it = reps_cache.find(key);
+  if (it == reps_cache.end()) {
+    if (reps_cache.size() > 64) reps_cache.clear();  // trials of many windows between two loops
+    it = reps_cache.emplace(key, computeLoopReps(component, first, cap)).first;
+  }
   return it->second;
 }
 
-std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(int component) const {
+std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(int component, size_t first,
+                                                                               int cap_loops) const {
   std::vector<const Edge*> in;
   for (const Edge& e : loops)
-    if (componentOf(e.to) == component) in.push_back(&e);
+    if (e.to >= first && componentOf(e.to) == component) in.push_back(&e);
   std::sort(in.begin(), in.end(), [](const Edge* a, const Edge* b) { return a->to < b->to; });
   std::vector<std::vector<const Edge*>> clusters;
   for (const Edge* e : in) {
@@ -724,7 +778,7 @@ std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(i
     const Edge* mid = cl[cl.size() / 2];
     reps.push_back(LoopRep{mid->from, mid->to, &mid->loop, static_cast<int>(cl.size())});
   }
-  const size_t cap = static_cast<size_t>(std::max(2, cfg.max_loop_anchors));
+  const size_t cap = static_cast<size_t>(std::max(2, cap_loops));
   if (reps.size() > cap) {
     const size_t keep_new = cap / 2, keep_old = cap - keep_new;
     const size_t n_old = reps.size() - keep_new;
@@ -739,9 +793,10 @@ std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(i
   return reps;
 }
 
-bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& extra, double variance_scale,
-                               CondensedGraph* cg, std::vector<size_t>* anchors) const {
-  const std::vector<LoopRep> reps = loopReps(component);
+bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& extra, const CondenseOptions& o,
+                                   CondensedGraph* cg, std::vector<size_t>* anchors) const {
+  const std::vector<LoopRep> reps = o.trial ? loopReps(component, o.first, cfg.trial_loop_anchors)
+                                            : loopReps(component, 0, cfg.max_loop_anchors);
   std::vector<size_t>& a = *anchors;
   a = extra;
   for (const LoopRep& r : reps) {
@@ -754,13 +809,13 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
     AnchorState st;
     st.p = Eigen::Vector3d(x[p].t[0], x[p].t[1], x[p].t[2]);
     st.yaw = x[p].yaw;
-    cg->addAnchor(st, kfs[p].pitch, kfs[p].roll, kfs[p].sequence == 0);
+    cg->addAnchor(st, kfs[p].pitch, kfs[p].roll, kfs[p].sequence == 0 || (o.trial && p <= o.first));
   }
   auto id = [&](size_t p) { return static_cast<int>(std::lower_bound(a.begin(), a.end(), p) - a.begin()); };
   for (size_t i = 1; i < a.size(); ++i) {
     const Keyframe& ka = kfs[a[i - 1]];
     const Keyframe& kb = kfs[a[i]];
-    if (ka.segment != kb.segment) continue;
+    if (ka.segment != kb.segment || (o.trial && a[i - 1] < o.first)) continue;
     const SequenceChain& ch = chains.at(ka.segment);
     CondensedEdge e;
     e.from = static_cast<int>(i - 1);
@@ -768,10 +823,11 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
     const Eigen::Matrix3d Ra = ka.vio.q.toRotationMatrix();
     e.t = Ra.transpose() * (kb.vio.t - ka.vio.t);
     e.yaw = wrapAngle(kb.yaw - ka.yaw);
-    e.covariance = variance_scale * ch.moments.relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
+    e.covariance = o.trial ? ch.unit.relative(a[i - 1] - ch.start, a[i] - ch.start, Ra)
+                           : o.variance_scale * ch.moments.relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
     if (!cg->addEdge(e)) return false;
   }
-  const Eigen::Matrix4d L = loopCovariance();
+  const Eigen::Matrix4d L = o.trial ? unitLoopCovariance() : loopCovariance();
   for (const LoopRep& r : reps) {
     CondensedEdge e;
     e.from = id(r.from);
@@ -779,6 +835,8 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
     e.t = r.loop->relative_t;
     e.yaw = r.loop->relative_yaw;
     e.covariance = L / r.count;
+    e.count = r.count;
+    if (o.trial) e.huber = cfg.loop_huber;
     if (!cg->addEdge(e)) return false;
   }
   return true;
@@ -843,6 +901,155 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
     }
     for (size_t j = 0; j < in.size(); ++j) x[anchors[in[j]]] = now[j];
   }
+}
+
+// ---- condensed trials (condense_min_window) --------------------------------------------
+
+bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, size_t mpos, size_t qpos,
+                                         const LoopCandidate* candidate, bool robust_candidate, int max_iterations,
+                                         TrialSolution* out) const {
+  const auto t0 = Clock::now();
+  // The window's first keyframe of the component is held fixed, as in the full trial.
+  size_t head = first;
+  while (head < kfs.size() && componentOf(head) != component) ++head;
+  if (head > mpos) return false;
+  CondenseOptions options;
+  options.trial = true;
+  options.first = head;
+  std::vector<size_t> extra = {head, mpos, qpos};
+  CondensedGraph cg;
+  std::vector<size_t> anchors;
+  if (!condense(component, extra, options, &cg, &anchors)) return false;
+  if (candidate) {
+    CondensedEdge e;
+    e.from = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), mpos) - anchors.begin());
+    e.to = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), qpos) - anchors.begin());
+    e.t = candidate->relative_t;
+    e.yaw = candidate->relative_yaw;
+    e.covariance = unitLoopCovariance();
+    if (robust_candidate) e.huber = cfg.loop_huber;
+    if (!cg.addEdge(e)) return false;
+  }
+  bool ok = false, converged = false;
+  const int iterations =
+      cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.function_tolerance);
+  if (!ok) return false;
+  out->condensed = true;
+  out->first = head;
+  out->component = component;
+  out->positions.clear();
+  out->states.clear();
+  for (size_t i = 0; i < anchors.size(); ++i) {
+    if (anchors[i] < head) continue;  // held fixed outside the window
+    KeyframeState st = x[anchors[i]];
+    const AnchorState& a = cg.state(static_cast<int>(i));
+    for (int k = 0; k < 3; ++k) st.t[k] = a.p[k];
+    st.yaw = a.yaw;
+    out->positions.push_back(anchors[i]);
+    out->states.push_back(st);
+  }
+  SolveSummary& o = out->summary;
+  o.iterations = iterations;
+  o.converged = converged;
+  o.finite = true;
+  for (const KeyframeState& st : out->states)
+    if (!std::isfinite(st.t[0] + st.t[1] + st.t[2] + st.yaw)) o.finite = false;
+  std::ostringstream msg;
+  msg << "condensed trial: " << anchors.size() << " anchors, " << cg.edgeCount() << " edges for "
+      << kfs.size() - head << " keyframes";
+  o.message = msg.str();
+  o.solve_ms = msSince(t0);
+  return true;
+}
+
+size_t KeyframeGraph::Impl::windowCount(const TrialSolution& s, bool skip_fixed_map) const {
+  size_t n = 0;
+  for (const auto& kv : chains) {
+    const SequenceChain& ch = kv.second;
+    const size_t end = ch.start + ch.moments.size();
+    if (end <= s.first || componentOf(ch.start) != s.component) continue;
+    if (skip_fixed_map && kfs[ch.start].sequence == 0) continue;
+    n += end - std::max(ch.start, s.first);
+  }
+  return n;
+}
+
+std::vector<size_t> KeyframeGraph::Impl::windowPositions(const TrialSolution& s, size_t stride,
+                                                         bool skip_fixed_map) const {
+  std::vector<size_t> out;
+  size_t k = 0;
+  for (const auto& kv : chains) {
+    const SequenceChain& ch = kv.second;
+    const size_t end = ch.start + ch.moments.size();
+    if (end <= s.first || componentOf(ch.start) != s.component) continue;
+    if (skip_fixed_map && kfs[ch.start].sequence == 0) continue;
+    for (size_t p = std::max(ch.start, s.first); p < end; ++p, ++k)
+      if (k % stride == 0) out.push_back(p);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, const std::vector<size_t>& targets) const {
+  const std::vector<size_t>& a = s.positions;
+  std::vector<KeyframeState> out;
+  out.reserve(targets.size());
+  // Per chain (anchor i to i + 1 of one segment): the weights of the conditional mean.
+  struct ChainFit {
+    bool ready = false;
+    double dyaw = 0;
+    Eigen::Matrix3d D, M;
+    Eigen::Vector4d w;
+  };
+  std::map<size_t, ChainFit> fits;
+  auto rigid = [&](size_t anchor_i, size_t p) {
+    const Correction c = correctionBetween(x[a[anchor_i]], s.states[anchor_i], kfs[a[anchor_i]]);
+    return applyCorrection(c, x[p], kfs[p]);
+  };
+  for (size_t p : targets) {
+    const size_t i = std::upper_bound(a.begin(), a.end(), p) - a.begin();  // anchors [0, i) are <= p
+    const bool left = i > 0 && kfs[a[i - 1]].segment == kfs[p].segment;
+    const bool right = i < a.size() && kfs[a[i]].segment == kfs[p].segment;
+    if (left && a[i - 1] == p) {
+      out.push_back(s.states[i - 1]);
+    } else if (left && right) {
+      const size_t pa = a[i - 1], pb = a[i];
+      const SequenceChain& ch = chains.at(kfs[p].segment);
+      const size_t la = pa - ch.start, lb = pb - ch.start;
+      ChainFit& f = fits[i - 1];
+      if (!f.ready) {
+        // The rigid move of a's correction, plus the chain's share of what is left at b
+        // (expressed in the VIO frame of the moments: M maps it into the solution's).
+        const KeyframeState& na = s.states[i - 1];
+        const KeyframeState& nb = s.states[i];
+        f.dyaw = wrapAngle(na.yaw - x[pa].yaw);
+        f.D = yawPitchRollToRotation(f.dyaw, 0, 0);
+        f.M = f.D * yawPitchRollToRotation(wrapAngle(x[pa].yaw - kfs[pa].yaw), 0, 0);
+        const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xb(x[pb].t[0], x[pb].t[1], x[pb].t[2]);
+        const Eigen::Vector3d Pa(na.t[0], na.t[1], na.t[2]), Pb(nb.t[0], nb.t[1], nb.t[2]);
+        Eigen::Vector4d gap;
+        gap.head<3>() = f.M.transpose() * (Pb - (Pa + f.D * (xb - xa)));
+        gap[3] = wrapAngle(nb.yaw - x[pb].yaw - f.dyaw);
+        f.w = ch.unit.cross(la, lb, lb).ldlt().solve(gap);
+        f.ready = true;
+      }
+      const Eigen::Vector4d corr = ch.unit.cross(la, p - ch.start, lb) * f.w;
+      const KeyframeState& na = s.states[i - 1];
+      const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xp(x[p].t[0], x[p].t[1], x[p].t[2]);
+      const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();
+      KeyframeState st = x[p];
+      for (int k = 0; k < 3; ++k) st.t[k] = t[k];
+      st.yaw = wrapAngle(x[p].yaw + f.dyaw + corr[3]);
+      out.push_back(st);
+    } else if (left) {
+      out.push_back(rigid(i - 1, p));
+    } else if (right) {
+      out.push_back(rigid(i, p));
+    } else {
+      out.push_back(x[p]);
+    }
+  }
+  return out;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1039,6 +1246,11 @@ TrialSolution KeyframeGraph::solveWindow(size_t mpos, size_t qpos, const LoopCan
   TrialSolution out;
   const size_t first = m.windowStart(mpos);
   const size_t window = m.kfs.size() - first;  // the trial's keyframes, at most
+  if (m.condensesTrials() && window > static_cast<size_t>(m.cfg.condense_min_window) &&
+      m.solveCondensed(first, m.root(m.kfs[qpos].segment), mpos, qpos, candidate, robust_candidate, max_iterations,
+                       &out))
+    return out;
+  out = TrialSolution();
   const double first_iteration_ms = window * m.iteration_cost.predict();
   const double solve_budget_ms = (1.0 - kBudgetAfterSolve) * time_budget_ms;
   if (time_budget_ms > 0) {
@@ -1088,6 +1300,20 @@ TrialSolution KeyframeGraph::solveWindow(size_t mpos, size_t qpos, const LoopCan
 int KeyframeGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* before,
                                Eigen::Matrix3Xd* after) const {
   const Impl& m = *impl_;
+  if (solution.condensed) {
+    const size_t n = m.windowCount(solution, true);
+    const size_t stride = std::max<size_t>(1, (n + kCondensedScoredKeyframes - 1) / kCondensedScoredKeyframes);
+    const std::vector<size_t> targets = m.windowPositions(solution, stride, true);
+    const std::vector<KeyframeState> states = m.expand(solution, targets);
+    before->resize(3, targets.size());
+    after->resize(3, targets.size());
+    for (size_t k = 0; k < targets.size(); ++k) {
+      const KeyframeState& b = m.x[targets[k]];
+      before->col(k) << b.t[0], b.t[1], b.t[2];
+      after->col(k) << states[k].t[0], states[k].t[1], states[k].t[2];
+    }
+    return static_cast<int>(targets.size());
+  }
   std::vector<size_t> scored;
   for (size_t i = 0; i < solution.positions.size(); ++i)
     if (m.kfs[solution.positions[i]].sequence != 0) scored.push_back(i);
@@ -1103,7 +1329,14 @@ int KeyframeGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3
   return static_cast<int>(scored.size());
 }
 
-void KeyframeGraph::adopt(const TrialSolution& solution) { impl_->adopt(solution.positions, solution.states); }
+void KeyframeGraph::adopt(const TrialSolution& solution) {
+  if (solution.condensed) {
+    const std::vector<size_t> targets = impl_->windowPositions(solution, 1, false);
+    impl_->adopt(targets, impl_->expand(solution, targets));
+    return;
+  }
+  impl_->adopt(solution.positions, solution.states);
+}
 
 BatchSolveResult KeyframeGraph::solveLikeLoopFusion(int max_iterations) const {
   Impl& m = *impl_;
@@ -1141,7 +1374,9 @@ bool KeyframeGraph::relativeCovariance(size_t match_pos, size_t query_pos, doubl
   if (m.componentOf(match_pos) != comp) return false;
   CondensedGraph cg;
   std::vector<size_t> a;
-  if (!m.condense(comp, {match_pos, query_pos}, variance_scale, &cg, &a)) return false;
+  Impl::CondenseOptions options;
+  options.variance_scale = variance_scale;
+  if (!m.condense(comp, {match_pos, query_pos}, options, &cg, &a)) return false;
   if (anchors) *anchors = static_cast<int>(a.size());
   const int gm = static_cast<int>(std::lower_bound(a.begin(), a.end(), match_pos) - a.begin());
   const int gq = static_cast<int>(std::lower_bound(a.begin(), a.end(), query_pos) - a.begin());
@@ -1195,7 +1430,9 @@ Status KeyframeGraph::updateEstimate(size_t position, double variance_scale) {
   const int comp = m.componentOf(position);
   CondensedGraph cg;
   std::vector<size_t> a;
-  if (!m.condense(comp, {}, variance_scale, &cg, &a))
+  Impl::CondenseOptions options;
+  options.variance_scale = variance_scale;
+  if (!m.condense(comp, {}, options, &cg, &a))
     return Status::Error("updateEstimate: a covariance of the condensed graph is unusable");
   if (a.empty()) return Status::Ok();
   bool any_fixed = false;

@@ -43,7 +43,17 @@ struct TrialSolution {
   std::vector<size_t> positions;      ///< optimised keyframes (positions in the graph), increasing
   std::vector<KeyframeState> states;  ///< their solution, in the same order
   SolveSummary summary;
+  /// A condensed trial (condense_min_window): positions/states hold its anchors only; the other
+  /// keyframes of the window [first, newest] of segment root `component` follow from them
+  /// (scoredPositions(), adopt()).
+  bool condensed = false;
+  size_t first = 0;
+  int component = 0;
 };
+
+/// A condensed trial scores at most this many keyframes of its window (evenly spaced): the
+/// RMSE of a smooth deformation, at a cost that does not grow with the window.
+constexpr size_t kCondensedScoredKeyframes = 2000;
 
 /// Result of solveLikeLoopFusion(): the trajectory loop_fusion's own optimisation would give.
 struct BatchSolveResult {
@@ -116,7 +126,9 @@ class KeyframeGraph {
   /// Solves the window [match - window_margin, newest] of the query's connected sequences,
   /// warm-started from X, with `candidate` as an extra loop edge (nullptr: none; robust: with
   /// the committed loops' Huber loss). The window's first keyframe and sequence 0 are held
-  /// fixed, older keyframes too. Does not change the graph. time_budget_ms <= 0: no limit;
+  /// fixed, older keyframes too. Does not change the graph. 4-DoF windows of more than
+  /// condense_min_window keyframes are solved on the condensed graph (bounded cost; the full
+  /// window if that fails). time_budget_ms <= 0: no limit;
   /// otherwise the call returns by it: a trial that cannot finish building and one iteration
   /// within it (at the cost per keyframe measured on this graph's solves so far) is not
   /// started, and the solve stops before an iteration that would end past it (both:
@@ -124,7 +136,8 @@ class KeyframeGraph {
   TrialSolution solveWindow(size_t match_pos, size_t query_pos, const LoopCandidate* candidate,
                             bool robust_candidate, int max_iterations, double time_budget_ms);
   /// Positions of the keyframes of a solution that may move (not sequence 0), in X (`before`)
-  /// and in the solution (`after`), 3 x N each. Returns N.
+  /// and in the solution (`after`), 3 x N each (a condensed trial: at most
+  /// kCondensedScoredKeyframes of them, evenly spaced). Returns N.
   int scoredPositions(const TrialSolution& solution, Eigen::Matrix3Xd* before,
                       Eigen::Matrix3Xd* after) const;
   /// X := the solution; keyframes added after the solution was computed follow the

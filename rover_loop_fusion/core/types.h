@@ -219,6 +219,17 @@ struct VerifierConfig {
   /// Keyframes before the match keyframe that are also optimised and scored (the trial
   /// window is [match - window_margin, newest]; everything older is held fixed).
   int window_margin = 0;
+  /// Bounded cost (4-DoF): a trial whose window holds more than this many keyframes is solved on
+  /// the condensed graph (core/condensed.h: the chains of odometry between the loop ends, the
+  /// match and the query become single edges with loop_fusion's unit weighting; the keyframes
+  /// between them follow as the linear solve places them; the score is taken on at most
+  /// kCondensedScoredKeyframes of them). 0 = always the full window (Ceres), as the paper.
+  /// The default is where the full trial starts to cost more than ~2 ms (docs/results.md).
+  int condense_min_window = 200;
+  /// Accepted loops at most in a condensed trial (loops of one revisit merged first, then older
+  /// ones thinned): what bounds its cost. Thinning leaves the trial less stiff than the full
+  /// window, so keep it above the loops a window usually holds.
+  int trial_loop_anchors = 256;
   /// Plausibility limits of a candidate's relative pose (loop_fusion's findConnection drops
   /// |t| >= 20 m and |yaw| >= 30 deg). Beyond them the candidate is invalid input.
   double max_relative_translation = 20.0;

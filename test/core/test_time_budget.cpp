@@ -41,6 +41,7 @@ core::VerifierConfig budget(double ms) {
   core::VerifierConfig cfg;
   cfg.time_budget_ms = ms;
   cfg.max_innovation = 0.0;  // the gate off: every candidate reaches the trial solve
+  cfg.condense_min_window = 0;  // the full-window (Ceres) trial: what the budget has to bound
   return cfg;
 }
 
