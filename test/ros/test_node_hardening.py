@@ -199,7 +199,8 @@ class NodeHardening(unittest.TestCase):
 
     def test_sigint_with_a_backlog_stops_promptly_and_says_what_it_did_not_verify(self):
         # 3000 keyframes on a line and 2500 candidates claiming its ends meet (1.5 km apart),
-        # with the innovation gate and the time budget off: each trial solve takes a while.
+        # with the innovation gate, the time budget and the condensed trial off: each (full
+        # window) trial solve takes a while.
         # After SIGINT the node finishes the verification under way, gives every candidate
         # it did not decide an invalid_input verdict saying so, logs it and exits. (The trial solves
         # converge in an iteration, a few ms each, and the first verdict can reach the test
@@ -210,7 +211,7 @@ class NodeHardening(unittest.TestCase):
         os.unlink(log)
         node = Node("sigint", {"candidate_timeout": 600.0, "optimize_period": 0.0, "verdict_log": log,
                                "rover/max_innovation": 0.0, "rover/time_budget_ms": 0.0,
-                               "rover/max_iterations": 200})
+                               "rover/max_iterations": 200, "rover/condense_min_window": 0})
         try:
             verdicts = Verdicts(node.name)
             self.assertTrue(verdicts.connected())
