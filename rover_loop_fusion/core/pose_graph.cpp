@@ -166,7 +166,7 @@ struct KeyframeGraph::Impl {
   struct SequenceChain {
     size_t start = 0;
     ChainMoments moments;
-    /// The same with loop_fusion's unit weighting (condensed trials, condense_min_window only).
+    /// The same with loop_fusion's unit weighting (condensed trials; 4-DoF only).
     ChainMoments unit;
   };
   std::map<int, SequenceChain> chains;
@@ -293,7 +293,8 @@ struct KeyframeGraph::Impl {
   /// the k-th neighbour by k e: stiffness sum k^2 per step). Yaw residuals are in degrees.
   Eigen::Matrix4d unitLoopCovariance() const;
   Eigen::Matrix4d unitStepCovariance() const;
-  bool condensesTrials() const { return fourDof() && cfg.condense_min_window > 0 && cfg.odometry_neighbours >= 1; }
+  /// Whether trials can be condensed (4-DoF with odometry; the unit moments are kept then).
+  bool condensable() const { return fourDof() && cfg.odometry_neighbours >= 1; }
   /// The condensed trial (solveWindow); false if it could not be built or solved.
   bool solveCondensed(size_t first, int component, size_t mpos, size_t qpos, const LoopCandidate* candidate,
                       bool robust_candidate, int max_iterations, TrialSolution* out) const;
@@ -698,7 +699,7 @@ void KeyframeGraph::Impl::appendMoments(size_t pos) {
   SequenceChain& ch = it->second;
   const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
   ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(), drift.stepCovariance(length));
-  if (condensesTrials()) ch.unit.append(kf.vio.t, kf.vio.q.toRotationMatrix(), unitStepCovariance());
+  if (condensable()) ch.unit.append(kf.vio.t, kf.vio.q.toRotationMatrix(), unitStepCovariance());
 }
 
 void KeyframeGraph::Impl::rebuildMoments(int sequence) {
@@ -955,8 +956,8 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, size_t mpo
   for (const KeyframeState& st : out->states)
     if (!std::isfinite(st.t[0] + st.t[1] + st.t[2] + st.yaw)) o.finite = false;
   std::ostringstream msg;
-  msg << "condensed trial: " << anchors.size() << " anchors, " << cg.edgeCount() << " edges for "
-      << kfs.size() - head << " keyframes";
+  msg << "condensed trial of " << kfs.size() - head << " keyframes: " << anchors.size() << " anchors, "
+      << cg.edgeCount() << " edges; scored on evenly spaced keyframes";
   o.message = msg.str();
   o.solve_ms = msSince(t0);
   return true;
@@ -1240,13 +1241,15 @@ double KeyframeGraph::innovation(const LoopCandidate& c, size_t qpos, size_t mpo
 double KeyframeGraph::pathLength(size_t from, size_t to) const { return impl_->pathLength(from, to); }
 
 TrialSolution KeyframeGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandidate* candidate,
-                                     bool robust_candidate, int max_iterations, double time_budget_ms) {
+                                         bool robust_candidate, int max_iterations, double time_budget_ms,
+                                         int condense_min_window) {
   const auto start = Clock::now();
   Impl& m = *impl_;
   TrialSolution out;
   const size_t first = m.windowStart(mpos);
   const size_t window = m.kfs.size() - first;  // the trial's keyframes, at most
-  if (m.condensesTrials() && window > static_cast<size_t>(m.cfg.condense_min_window) &&
+  const int condense_above = condense_min_window >= 0 ? condense_min_window : m.cfg.condense_min_window;
+  if (m.condensable() && condense_above > 0 && window > static_cast<size_t>(condense_above) &&
       m.solveCondensed(first, m.root(m.kfs[qpos].segment), mpos, qpos, candidate, robust_candidate, max_iterations,
                        &out))
     return out;

@@ -133,8 +133,10 @@ class KeyframeGraph {
   /// within it (at the cost per keyframe measured on this graph's solves so far) is not
   /// started, and the solve stops before an iteration that would end past it (both:
   /// summary.timed_out, with why in summary.message; a stopped solve keeps its last iterate).
+  /// `condense_min_window` >= 0 overrides the config's (diagnostics: Verifier::compareTrials).
   TrialSolution solveWindow(size_t match_pos, size_t query_pos, const LoopCandidate* candidate,
-                            bool robust_candidate, int max_iterations, double time_budget_ms);
+                            bool robust_candidate, int max_iterations, double time_budget_ms,
+                            int condense_min_window = -1);
   /// Positions of the keyframes of a solution that may move (not sequence 0), in X (`before`)
   /// and in the solution (`after`), 3 x N each (a condensed trial: at most
   /// kCondensedScoredKeyframes of them, evenly spaced). Returns N.

@@ -90,8 +90,8 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     return reject(Reason::kInvalidInput,
                   "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
 
-  measured.innovation = graph_.innovation(c, qpos, mpos);
   if (usesChi2()) {
+    measured.innovation = graph_.innovation(c, qpos, mpos);
     // (No path length: its Dijkstra over every loop end would be the one cost that grows with
     // the run; the chi2 decision does not use it.)
     Eigen::Matrix4d C;
@@ -122,33 +122,64 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     pending_.chain_covariance = C / drift_scale_;
     return withNumbers(Verdict::Accept(c, test.detail), measured, t0);
   }
-  measured.path_length = graph_.pathLength(mpos, qpos);
-  measured.threshold = scoreThreshold(config_, measured.path_length);
-  const Check gate = innovationGate(config_, measured.innovation, measured.path_length);
-  if (!gate.passed) return reject(gate.reason, gate.detail);
-
-  // The budget counts from the call: what the checks above took is spent.
-  const double budget_left =
-      config_.time_budget_ms > 0 ? std::max(1e-3, config_.time_budget_ms - msSince(t0)) : 0.0;
-  TrialSolution trial = graph_.solveWindow(mpos, qpos, &c, config_.robust_candidate,
-                                           config_.max_iterations, budget_left);
-  const SolveSummary& o = trial.summary;
-  measured.iterations = o.iterations;
-  measured.solve_ms = o.solve_ms;
-  measured.converged = o.converged && o.finite;
-  // Scored: the keyframes that may move (sequence 0 is a fixed prior map).
-  Eigen::Matrix3Xd before, after;
-  measured.window_size = graph_.scoredPositions(trial, &before, &after);
-  if (o.finite) measured.score = deformationScore(before, after, config_.alignment);
-
-  const Check score = scoreTest(o, measured.score, measured.threshold, measured.window_size,
-                                config_.time_budget_ms);
-  if (!score.passed) return reject(score.reason, score.detail);
+  TrialSolution trial;
+  const Check decided = metricDecision(c, qpos, mpos, -1, t0, &measured, &trial);
+  if (!decided.passed) return reject(decided.reason, decided.detail);
   pending_.valid = true;
   pending_.candidate = c;
   pending_.revision = graph_.revision();
   pending_.solution = std::move(trial);
-  return withNumbers(Verdict::Accept(c, score.detail), measured, t0);
+  return withNumbers(Verdict::Accept(c, decided.detail), measured, t0);
+}
+
+Check Verifier::metricDecision(const LoopCandidate& c, size_t qpos, size_t mpos, int condense_min_window,
+                               std::chrono::steady_clock::time_point t0, Verdict* measured, TrialSolution* trial) {
+  measured->innovation = graph_.innovation(c, qpos, mpos);
+  measured->path_length = graph_.pathLength(mpos, qpos);
+  measured->threshold = scoreThreshold(config_, measured->path_length);
+  const Check gate = innovationGate(config_, measured->innovation, measured->path_length);
+  if (!gate.passed) return gate;
+
+  // The budget counts from the call: what the checks above took is spent.
+  const double budget_left =
+      config_.time_budget_ms > 0 ? std::max(1e-3, config_.time_budget_ms - msSince(t0)) : 0.0;
+  *trial = graph_.solveWindow(mpos, qpos, &c, config_.robust_candidate, config_.max_iterations, budget_left,
+                              condense_min_window);
+  const SolveSummary& o = trial->summary;
+  measured->iterations = o.iterations;
+  measured->solve_ms = o.solve_ms;
+  measured->converged = o.converged && o.finite;
+  // Scored: the keyframes that may move (sequence 0 is a fixed prior map).
+  Eigen::Matrix3Xd before, after;
+  measured->window_size = graph_.scoredPositions(*trial, &before, &after);
+  if (o.finite) measured->score = deformationScore(before, after, config_.alignment);
+
+  Check score = scoreTest(o, measured->score, measured->threshold, measured->window_size, config_.time_budget_ms);
+  if (trial->condensed) score.detail += " (" + o.message + ")";
+  return score;
+}
+
+std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int condense_min_window) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  size_t qpos = 0, mpos = 0;
+  std::string why = graph_.checkLoop(c, &qpos, &mpos);
+  if (why.empty() && !graph_.connected(qpos, mpos)) why = "no trajectory prior: no trial";
+  if (why.empty() && graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) why = "both in sequence 0";
+  if (why.empty() && usesChi2()) why = "decision chi2: no trial";
+  if (!why.empty()) {
+    const Verdict v = Verdict::Reject(Reason::kInvalidInput, c, why);
+    return {v, v};
+  }
+  auto decide = [&](int condense) {
+    const auto t0 = Clock::now();
+    Verdict measured;
+    TrialSolution trial;
+    const Check d = metricDecision(c, qpos, mpos, condense, t0, &measured, &trial);
+    Verdict v = d.passed ? Verdict::Accept(c, d.detail) : Verdict::Reject(d.reason, c, d.detail);
+    return withNumbers(v, measured, t0);
+  };
+  const Verdict full = decide(0);
+  return {full, decide(condense_min_window)};
 }
 
 Status Verifier::commit(const LoopCandidate& c) {

@@ -40,11 +40,15 @@
 
 #include <Eigen/Geometry>
 
+#include <chrono>
 #include <mutex>
+#include <utility>
 #include <vector>
 
 namespace rover_loop_fusion {
 namespace core {
+
+struct Check;  // core/decision.h
 
 class Verifier {
  public:
@@ -102,6 +106,13 @@ class Verifier {
   /// decision chi2: the variance scale of the drift model (1 unless calibrate_drift fitted it).
   double driftScale() const;
 
+  /// Diagnostics (the agreement benchmark, rover_replay --compare-trials): the verdicts that
+  /// decision metric gives `c` against the graph and X as they are now with the full-window
+  /// trial (first) and with trials over more than `condense_min_window` keyframes condensed
+  /// (second). Changes nothing (no pending commit, nothing held); a candidate with no trial
+  /// (invalid, no prior, decision chi2) gets the same invalid_input verdict in both.
+  std::pair<Verdict, Verdict> compareTrials(const LoopCandidate& candidate, int condense_min_window);
+
  private:
   /// A held candidate.
   struct Held {
@@ -111,6 +122,10 @@ class Verifier {
     bool no_prior = false; ///< held for confirm_without_prior (else for hold_sigma)
   };
   bool usesChi2() const;
+  /// decision metric from the innovation gate on: fills the numbers and the trial (trials over
+  /// more than `condense_min_window` keyframes condensed; -1: the config's).
+  Check metricDecision(const LoopCandidate& c, size_t query_pos, size_t match_pos, int condense_min_window,
+                       std::chrono::steady_clock::time_point t0, Verdict* measured, TrialSolution* trial);
   void recalibrate();
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
   void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, bool no_prior);

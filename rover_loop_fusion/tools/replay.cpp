@@ -3,7 +3,8 @@
 // keyframe has arrived. Writes the verdict log and the resulting trajectories.
 //
 //   rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]
-//                [--config FILE] [--<parameter> VALUE ...] [--snapshots K] [--quiet]
+//                [--config FILE] [--<parameter> VALUE ...] [--snapshots K]
+//                [--compare-trials N] [--quiet]
 //
 // Verifier parameters: every row of the parameter table (core/parameters.h) is a flag
 // --<name> VALUE (a boolean flag alone means true); --config FILE reads a verifier YAML with
@@ -26,6 +27,10 @@
 //   loop_fusion_verified.tum        loop_fusion's optimisation of the verified graph
 //   loop_fusion_accept_all.tum      loop_fusion's optimisation with every candidate
 //   groundtruth.tum                 (if the scenario has ground truth)
+//   trials.csv                      with --compare-trials N (decision metric): for every candidate,
+//                                   before its verify(), the verdicts of the full-window trial
+//                                   and of the trial condensed above N keyframes against the same
+//                                   graph and X (Verifier::compareTrials; the agreement benchmark)
 //   snapshots/{verified,loop_fusion_verified,loop_fusion_accept_all}_K.tum
 //                                   with --snapshots K: the same trajectories as the run had
 //                                   them after k/K of the keyframes, k = 1..K (what the system
@@ -53,7 +58,8 @@ int usage(int code) {
   std::FILE* out = code ? stderr : stdout;
   std::fprintf(out,
                "usage: rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]\n"
-               "                    [--config FILE] [--<parameter> VALUE ...] [--snapshots K] [--quiet]\n"
+               "                    [--config FILE] [--<parameter> VALUE ...] [--snapshots K]\n"
+               "                    [--compare-trials N] [--quiet]\n"
                "verifier parameters (applied in order; --config FILE reads a verifier YAML such as\n"
                "config/rover_indoor.yaml; the defaults are that file's; a boolean flag alone means true):\n");
   for (const core::Parameter& p : core::verifierParameters())
@@ -96,6 +102,7 @@ int main(int argc, char** argv) {
   core::VerifierConfig cfg;
   bool quiet = false;
   int snapshots = 0;
+  int compare_trials = -1;
   auto fail = [](const std::string& what) {
     std::fprintf(stderr, "rover_replay: %s (rover_replay --help lists the parameters)\n", what.c_str());
     return 2;
@@ -131,6 +138,9 @@ int main(int argc, char** argv) {
       if (!core::readParameterFile(argv[++i], &cfg, &error)) return fail(error);
     } else if (a == "--snapshots") {
       if (!count(argv[++i], &snapshots)) return fail("--snapshots must be a count (got '" + std::string(argv[i]) + "')");
+    } else if (a == "--compare-trials") {
+      if (!count(argv[++i], &compare_trials) || compare_trials < 1)
+        return fail("--compare-trials must be a keyframe count >= 1 (got '" + std::string(argv[i]) + "')");
     } else if (a == "--quiet") quiet = true;
     else return fail("unknown option " + a);
   }
@@ -153,6 +163,19 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::fprintf(csv, "%s\n", core::verdictCsvHeader().c_str());
+  std::FILE* trials_csv = nullptr;
+  if (compare_trials > 0) {
+    trials_csv = std::fopen((out_dir + "/trials.csv").c_str(), "w");
+    if (!trials_csv) {
+      std::fprintf(stderr, "rover_replay: cannot write %s/trials.csv\n", out_dir.c_str());
+      return 1;
+    }
+    std::fprintf(trials_csv, "query_index,match_index,label");
+    for (const char* k : {"full", "condensed"})
+      std::fprintf(trials_csv, ",%s_accepted,%s_reason,%s_score,%s_threshold,%s_window,%s_iterations,%s_ms", k, k, k,
+                   k, k, k, k);
+    std::fprintf(trials_csv, "\n");
+  }
 
   // Candidates are verified once their query keyframe is in the graph (file order kept).
   std::multimap<int64_t, size_t> by_query;
@@ -199,6 +222,15 @@ int main(int argc, char** argv) {
   };
   auto handle = [&](const sim::ScenarioCandidate& sc) {
     const core::LoopCandidate& c = sc.candidate;
+    if (trials_csv) {
+      const std::pair<core::Verdict, core::Verdict> t = verifier.compareTrials(c, compare_trials);
+      std::fprintf(trials_csv, "%lld,%lld,%d", static_cast<long long>(c.query_index),
+                   static_cast<long long>(c.match_index), sc.label);
+      for (const core::Verdict* x : {&t.first, &t.second})
+        std::fprintf(trials_csv, ",%d,%s,%.6f,%.6f,%d,%d,%.4f", x->accepted ? 1 : 0, core::toString(x->reason),
+                     x->score, x->threshold, x->window_size, x->iterations, x->elapsed_ms);
+      std::fprintf(trials_csv, "\n");
+    }
     const core::Verdict v = verifier.verify(c);
     ++verified;
     verify_ms += v.elapsed_ms;
@@ -273,6 +305,7 @@ int main(int argc, char** argv) {
   // Snapshots still due (the last keyframes were refused).
   for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);
   std::fclose(csv);
+  if (trials_csv) std::fclose(trials_csv);
 
   std::vector<core::Pose> estimate;
   for (const core::TrajectoryPoint& p : verifier.trajectory()) estimate.push_back(p.estimate);
