@@ -24,6 +24,11 @@ from typing import Callable, List
 
 import numpy as np
 
+try:
+    from scipy.spatial import cKDTree
+except ImportError:  # the system Python (scripts/simulate.py) has no scipy: the plain scan
+    cKDTree = None
+
 from . import geometry as g
 from .scenario import Candidate, Keyframe, Scenario
 
@@ -256,9 +261,15 @@ def candidate_pools(truth, twins, rng, min_gap=50, radius=0.5, yaw_tol=np.radian
     n = len(truth)
     P = np.array([T[:3, 3] for T in truth])
     Y = np.array([g.yaw_of(T[:3, :3]) for T in truth])
+    # Only keyframes within `radius` can match: a k-d tree finds them without scanning every
+    # older keyframe (the same earliest match; the 100k-keyframe long replay needs it).
+    tree = cKDTree(P) if older is None and cKDTree is not None else None
 
     def earliest_near(p, yaw, q, exclude_near=None):
-        cands = np.arange(0, max(0, q - min_gap)) if older is None else older(q)
+        if tree is not None:
+            cands = np.array(sorted(i for i in tree.query_ball_point(p, radius) if i < q - min_gap), dtype=int)
+        else:
+            cands = np.arange(0, max(0, q - min_gap)) if older is None else older(q)
         if cands.size == 0:
             return None
         ok = (np.linalg.norm(P[cands] - p, axis=1) < radius) & (np.abs(g.wrap(Y[cands] - yaw)) < yaw_tol)
