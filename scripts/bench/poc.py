@@ -41,11 +41,19 @@ TRAJ_COLUMNS = [("case", "case", ""), ("ate_odometry", "odometry", ".2f"),
                 ("ate_rover+lm", "LM ROVER", ".2f"), ("tate_rover+lm", "LM ROVER tATE", ".2f")]
 
 
-def run_case(job):
-    case, out, snapshots, decision = job
+def setup(case, out, decision=()):
+    """The case's scenario, written to out/scenarios/<case>: (the Scenario, its directory, the
+    Problem, ROVER's rover_replay flags after the shipped YAML and mode: methods.evaluate's
+    replay_args). bench/agreement.py builds its cases with it too."""
     s = case.build()
     d = os.path.join(out, "scenarios", case.name)
     scenario.write(s, d)
+    return s, d, problem.from_scenario(s, drift_model.MODELS[case.environment], "4dof"), list(decision)
+
+
+def run_case(job):
+    case, out, snapshots, decision = job
+    _, d, prob, rover_args = setup(case, out, decision)
     labels = os.path.join(d, "candidates.csv")
     curves = {}
     row = {"environment": case.environment}
@@ -56,8 +64,7 @@ def run_case(job):
         r = metrics.ranking_metrics(j["label"], j["score"])
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
-    prob = problem.from_scenario(s, drift_model.MODELS[case.environment], "4dof")
-    info, rows = methods.evaluate(case, d, prob, decision, out, methods=("rover", "accept_all"), snapshots=snapshots)
+    info, rows = methods.evaluate(case, d, prob, rover_args, out, methods=("rover", "accept_all"), snapshots=snapshots)
     row.update(info)
     for r in rows:
         if r["method"].startswith("rover"):

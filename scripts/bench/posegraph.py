@@ -31,6 +31,7 @@ from roverlib import bench, g2o, methods, metrics, problem, robust, scenario
 
 SELECTIONS = ("rover", "pcm", "ipc", "gnc", "dcs")
 MAX_LOOPS = {"parking-garage": 100}  # others: 200
+QUICK_MAX_LOOPS = 40  # --quick (CI), every graph
 CASE_COLUMNS = [("case", "case", ""), ("true", "true", "d"), ("false", "false", "d"),
                 ("rover_reasons", "ROVER verdicts", ""), ("rover+lf:verify_ms_p50", "ROVER ms p50", ".1f"),
                 ("rover+lf:verify_ms_p99", "p99", ".1f"), ("rover_over_200ms", ">200ms", ".2f"),
@@ -52,19 +53,28 @@ def graph_and_truth(name):
     return _GRAPHS[name]
 
 
-def run_case(job):
-    case, out, snapshots, time_limit, max_loops, decision = job
+def setup(case, out, decision=(), max_loops=None):
+    """poc.setup() for a pose-graph case, at most max_loops true loops (default MAX_LOOPS): (the
+    Scenario, its directory out/scenarios/<case>, the Problem, ROVER's replay_args for
+    methods.evaluate)."""
     k = case.kwargs
     graph, truth, _ = graph_and_truth(k["graph"])
     true_loops = g2o.subsample_loops(graph, max_loops or MAX_LOOPS.get(k["graph"], 200), seed=k["seed"])
     outliers = g2o.inject_outliers(graph, len(true_loops), k["kind"], k["fraction"], truth, seed=k["seed"],
                                    first_true_query=min(e.query for e in true_loops))
     d = os.path.join(out, "scenarios", case.name)
-    scenario.write(g2o.to_scenario(graph, true_loops, outliers, truth, seed=k["seed"],
-                                   meta={"outliers": k["kind"], "fraction": k["fraction"]}), d)
+    s = g2o.to_scenario(graph, true_loops, outliers, truth, seed=k["seed"],
+                        meta={"outliers": k["kind"], "fraction": k["fraction"]})
+    scenario.write(s, d)
     prob = problem.from_g2o(graph, g2o.ordered_candidates(true_loops, outliers, k["seed"]), truth)
-    info, rows = methods.evaluate(case, d, prob, ["--max_relative_yaw_deg", 180, *decision], out, snapshots=snapshots,
-                                  time_limit=time_limit)
+    return s, d, prob, ["--max_relative_yaw_deg", 180, *decision]
+
+
+def run_case(job):
+    case, out, snapshots, time_limit, max_loops, decision = job
+    k = case.kwargs
+    _, d, prob, rover_args = setup(case, out, decision, max_loops)
+    info, rows = methods.evaluate(case, d, prob, rover_args, out, snapshots=snapshots, time_limit=time_limit)
     info.update(graph=k["graph"], kind=k["kind"], pct=int(round(100 * k["fraction"])))
     print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
                                          if r["method"] in ("rover+lf", "pcm+lf", "ipc+lf", "gnc", "dcs")), flush=True)
@@ -114,7 +124,7 @@ def main(argv=None):
     ap.add_argument("--max-loops", type=int, help="true loops per graph (default 200, parking-garage 100; --quick 40)")
     a = ap.parse_args(argv)
     cases = bench.select_cases("posegraph", a)
-    max_loops = a.max_loops or (40 if a.quick else None)
+    max_loops = a.max_loops or (QUICK_MAX_LOOPS if a.quick else None)
     os.makedirs(a.out, exist_ok=True)
     # the costliest graphs first, so that no worker is left alone with them at the end
     cost = {"kitti_00": 0, "parking-garage": 1, "manhattan3500": 2, "ringCity": 3, "ring": 4}

@@ -35,13 +35,21 @@ CASE_COLUMNS = [("case", "case", ""), ("keyframes", "kf", "d"), ("true", "true",
                 ("limits", "time limit hit", "")]
 
 
-def run_case(job):
-    case, out, snapshots, time_limit, decision = job
+def setup(case, out, decision=()):
+    """poc.setup() for a real-drift case: (the Scenario, its directory out/scenarios/<case>, the Problem,
+    ROVER's replay_args for methods.evaluate)."""
     s = case.build()
-    mode, alignment, env = s.meta["mode"], s.meta["alignment"], s.meta["environment"]
-    params = bench.defaults(env)
     d = os.path.join(out, "scenarios", case.name)
     scenario.write(s, d)
+    prob = problem.from_scenario(s, drift_model.MODELS[s.meta["environment"]], s.meta["mode"])
+    return s, d, prob, ["--alignment", s.meta["alignment"], *decision]
+
+
+def run_case(job):
+    case, out, snapshots, time_limit, decision = job
+    s, d, prob, rover_args = setup(case, out, decision)
+    mode, alignment, env = s.meta["mode"], s.meta["alignment"], s.meta["environment"]
+    params = bench.defaults(env)
     row = {"threshold": params["threshold"]}
     curves = {}
     for p in ("oracle", "none"):
@@ -52,8 +60,7 @@ def run_case(job):
         r = metrics.ranking_metrics(j["label"], j["score"])
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
-    prob = problem.from_scenario(s, drift_model.MODELS[env], mode)
-    info, rows = methods.evaluate(case, d, prob, ["--alignment", alignment, *decision], out, snapshots=snapshots,
+    info, rows = methods.evaluate(case, d, prob, rover_args, out, snapshots=snapshots,
                                   time_limit=time_limit)
     row.update(info)
     print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows

@@ -109,6 +109,14 @@ def sets_at(sizes, loops, per_candidate):
     return out
 
 
+def rover_flags(environment, problem, replay_args=()):
+    """rover_replay flags of ROVER's sequential run in evaluate() (bench/agreement.py runs the
+    same): the environment's shipped YAML, the problem's mode, the family's replay_args, time
+    budget lifted."""
+    mode = "4dof" if problem.dof in (3, 4) else "6dof"
+    return bench.shipped(environment, "--mode", mode, *replay_args, "--time_budget_ms", 0)
+
+
 def evaluate(case, scn_dir, problem, replay_args, out_dir, methods=ALL_METHODS, snapshots=10, time_limit=600.0,
              align="se3"):
     """Runs every method on one case. Returns (info: dict for the family's case table,
@@ -120,7 +128,7 @@ def evaluate(case, scn_dir, problem, replay_args, out_dir, methods=ALL_METHODS, 
     runs = os.path.join(out_dir, "runs", case.name)
     # ROVER, sequential, the product's mode
     seq = bench.replay(scn_dir, os.path.join(runs, "rover"), "sequential",
-                       bench.shipped(case.environment, "--mode", mode, *replay_args, "--time_budget_ms", 0), snapshots)
+                       rover_flags(case.environment, problem, replay_args), snapshots)
     gt = metrics.read_tum(os.path.join(seq, "groundtruth.tum"))
     stamps = np.array(gt.timestamps)
     j = bench.labelled(seq, os.path.join(scn_dir, "candidates.csv"))

@@ -151,3 +151,21 @@ def test_decision_flag_reaches_rover_replay(tmp_path):
     assert {v["reason"] for v in verdicts} <= {"accepted", "inconsistent_with_drift", "lookalike_closer"}
     assert "ROVER decision: chi2" in (tmp_path / "summary.md").read_text()
     _summary(tmp_path / "summary.csv", "poc")
+
+
+def test_agreement_quick(tmp_path):
+    # The condensed trial against the full-window trial (issue 13): every family and comparison
+    # gets a summary row over real candidates, and on the same graph and X (same-state) the two
+    # trials decide alike: a condensed trial that moved the keyframes wrongly would not.
+    agreement = script("bench/agreement.py")
+    assert agreement.main(["--quick", "--jobs", "1", "--out", str(tmp_path)]) == 0
+    with open(tmp_path / "summary.csv") as f:
+        rows = {(r["family"], r["comparison"]): r for r in csv.DictReader(f)}
+    for family in ("poc", "real", "posegraph"):
+        for comparison in ("same-state", "oracle", "sequential"):
+            r = rows[(family, comparison)]
+            assert int(r["candidates"]) > 0 and int(r["agree"]) <= int(r["candidates"])
+        same = rows[(family, "same-state")]
+        assert float(same["agree_pct"]) >= 99.0, same
+        assert int(same["scored"]) > 0 and float(same["dscore_median"]) < 0.05, same
+    assert (tmp_path / "disagreements.csv").exists() and (tmp_path / "summary.md").exists()
