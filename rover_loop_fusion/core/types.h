@@ -229,7 +229,7 @@ struct VerifierConfig {
   /// Accepted loops at most in a condensed trial (loops of one revisit merged first, then older
   /// ones thinned): what bounds its cost. Thinning leaves the trial less stiff than the full
   /// window, so keep it above the loops a window usually holds.
-  int trial_loop_anchors = 256;
+  int trial_loop_anchors = 1024;
   /// Plausibility limits of a candidate's relative pose (loop_fusion's findConnection drops
   /// |t| >= 20 m and |yaw| >= 30 deg). Beyond them the candidate is invalid input.
   double max_relative_translation = 20.0;
