@@ -15,6 +15,7 @@
 #include <queue>
 #include <sstream>
 #include <tuple>
+#include <utility>
 
 namespace rover_loop_fusion {
 namespace core {
@@ -302,9 +303,11 @@ struct KeyframeGraph::Impl {
   /// solution: between two anchors of a segment the chain's conditional mean (as the linear
   /// solve places them), before the first and after the last anchor rigidly with it.
   std::vector<KeyframeState> expand(const TrialSolution& s, const std::vector<size_t>& targets) const;
-  /// The window positions of a condensed solution's component (every `stride`-th, increasing).
+  /// The window of a condensed solution: [begin, end) positions, one range per segment of its
+  /// component (skip_fixed_map: not sequence 0's).
+  std::vector<std::pair<size_t, size_t>> windowRanges(const TrialSolution& s, bool skip_fixed_map) const;
+  /// Every `stride`-th keyframe of windowRanges(), increasing.
   std::vector<size_t> windowPositions(const TrialSolution& s, size_t stride, bool skip_fixed_map) const;
-  size_t windowCount(const TrialSolution& s, bool skip_fixed_map) const;
   int componentOf(size_t pos) const;
   /// Carries new anchor states to every keyframe of the component: chains between anchors by
   /// the chain model's conditional mean, the ends rigidly with their anchor.
@@ -963,30 +966,26 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, size_t mpo
   return true;
 }
 
-size_t KeyframeGraph::Impl::windowCount(const TrialSolution& s, bool skip_fixed_map) const {
-  size_t n = 0;
+std::vector<std::pair<size_t, size_t>> KeyframeGraph::Impl::windowRanges(const TrialSolution& s,
+                                                                         bool skip_fixed_map) const {
+  std::vector<std::pair<size_t, size_t>> out;
   for (const auto& kv : chains) {
     const SequenceChain& ch = kv.second;
     const size_t end = ch.start + ch.moments.size();
     if (end <= s.first || componentOf(ch.start) != s.component) continue;
     if (skip_fixed_map && kfs[ch.start].sequence == 0) continue;
-    n += end - std::max(ch.start, s.first);
+    out.emplace_back(std::max(ch.start, s.first), end);
   }
-  return n;
+  return out;
 }
 
 std::vector<size_t> KeyframeGraph::Impl::windowPositions(const TrialSolution& s, size_t stride,
                                                          bool skip_fixed_map) const {
   std::vector<size_t> out;
   size_t k = 0;
-  for (const auto& kv : chains) {
-    const SequenceChain& ch = kv.second;
-    const size_t end = ch.start + ch.moments.size();
-    if (end <= s.first || componentOf(ch.start) != s.component) continue;
-    if (skip_fixed_map && kfs[ch.start].sequence == 0) continue;
-    for (size_t p = std::max(ch.start, s.first); p < end; ++p, ++k)
+  for (const auto& range : windowRanges(s, skip_fixed_map))
+    for (size_t p = range.first; p < range.second; ++p, ++k)
       if (k % stride == 0) out.push_back(p);
-  }
   std::sort(out.begin(), out.end());
   return out;
 }
@@ -1304,7 +1303,8 @@ int KeyframeGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3
                                Eigen::Matrix3Xd* after) const {
   const Impl& m = *impl_;
   if (solution.condensed) {
-    const size_t n = m.windowCount(solution, true);
+    size_t n = 0;
+    for (const auto& range : m.windowRanges(solution, true)) n += range.second - range.first;
     const size_t stride = std::max<size_t>(1, (n + kCondensedScoredKeyframes - 1) / kCondensedScoredKeyframes);
     const std::vector<size_t> targets = m.windowPositions(solution, stride, true);
     const std::vector<KeyframeState> states = m.expand(solution, targets);
