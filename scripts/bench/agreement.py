@@ -79,13 +79,6 @@ DISAGREEMENT_COLUMNS = [("family", "family", ""), ("comparison", "comparison", "
                         ("a_window", "A window", "d")]
 
 
-def condense_setting(environment):
-    """condense_min_window of config/rover_<environment>.yaml (None if the file has none)."""
-    import yaml
-    with open(bench.config_path(environment)) as f:
-        return yaml.safe_load(f).get("condense_min_window")
-
-
 def build_stamp(replay):
     """Modification times of rover_replay and the workspace's libraries it loads (a rebuild
     during the run would mix two builds)."""
@@ -239,7 +232,9 @@ def main(argv=None):
     n_env = {}  # environment -> N of run B
     if a.b_args is None:
         for env in sorted({c.environment for _, c in chosen}):
-            n = a.condense_min_window if a.condense_min_window is not None else condense_setting(env)
+            n = a.condense_min_window
+            if n is None:
+                n = bench.shipped_config(env).get("condense_min_window")
             if not n:
                 sys.exit(f"config/rover_{env}.yaml sets no condense_min_window > 0 (N = {n}): "
                          "pass --condense-min-window N (or a stand-in pair with --a-args/--b-args)")

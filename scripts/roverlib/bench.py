@@ -120,12 +120,17 @@ def write_summary(rows, path):
                         (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in SUMMARY_COLUMNS])
 
 
-def defaults(environment):
-    """The decision parameters of config/rover_<environment>.yaml (indoor, outdoor) as a dict,
-    for tables and titles (the runs themselves read the whole file: shipped())."""
+def shipped_config(environment):
+    """config/rover_<environment>.yaml (indoor, outdoor) as a dict."""
     import yaml
     with open(config_path(environment)) as f:
-        c = yaml.safe_load(f)
+        return yaml.safe_load(f)
+
+
+def defaults(environment):
+    """The decision parameters of config/rover_<environment>.yaml as a dict, for tables and
+    titles (the runs themselves read the whole file: shipped())."""
+    c = shipped_config(environment)
     return {k: float(c[k]) for k in DECISION_KEYS}
 
 
