@@ -199,6 +199,9 @@ std::vector<Parameter> makeTable() {
   t.push_back(integer("confirm_window", "keyframes", &C::confirm_window, 1, 100000,
                       "a held candidate not confirmed within this many keyframes is dropped; also how close "
                       "the queries of one stretch are"));
+  t.push_back(integer("revoke_group", "", &C::revoke_group, 0, 100,
+                      "rivals of one stretch that must agree (and outnumber the accepted loops they "
+                      "contradict) to revoke those loops; 0: no revocation"));
   t.push_back(number("hold_sigma", "m", &C::hold_sigma, 0.0, 1000.0, false,
                      "chi2: hold candidates while the relative position's largest standard deviation exceeds "
                      "this (the prior alone too weak); 0: never hold"));

@@ -1463,5 +1463,20 @@ Status KeyframeGraph::removeLoop(int64_t query_index, int64_t match_index) {
   return Status::Error("removeLoop: no loop " + describeIndex(query_index) + " -> " + describeIndex(match_index));
 }
 
+std::vector<LoopCandidate> KeyframeGraph::loopsWithQueryIn(size_t first, size_t last) const {
+  std::vector<LoopCandidate> out;
+  for (const Impl::Edge& e : impl_->loops)
+    if (e.to >= first && e.to <= last) out.push_back(e.loop);
+  return out;
+}
+
+std::vector<KeyframeState> KeyframeGraph::estimates() const { return impl_->x; }
+
+bool KeyframeGraph::restoreEstimates(const std::vector<KeyframeState>& states) {
+  if (states.size() != impl_->x.size()) return false;
+  impl_->x = states;
+  return true;
+}
+
 }  // namespace core
 }  // namespace rover_loop_fusion

@@ -175,9 +175,16 @@ class KeyframeGraph {
   /// loops (Gauss-Newton on the condensed graph; the chains between anchors follow as the
   /// linear solve places them). Error (X unchanged) if the solve failed.
   Status updateEstimate(size_t position, double variance_scale);
-  /// Removes an accepted loop (a revocation); X is not updated (updateEstimate). The sequences
-  /// stay connected.
+  /// Removes an accepted loop (a revocation); X is not updated (updateEstimate, solveWindow).
+  /// The sequences stay connected.
   Status removeLoop(int64_t query_index, int64_t match_index);
+  /// The accepted loops whose query keyframe lies at positions [first, last] (a revisit's
+  /// stretch), in the order they were added. O(loops).
+  std::vector<LoopCandidate> loopsWithQueryIn(size_t first, size_t last) const;
+  /// X of every keyframe, and X := such a copy again (a revocation that did not go through puts
+  /// the estimate back; false, X unchanged, if the keyframe count differs).
+  std::vector<KeyframeState> estimates() const;
+  bool restoreEstimates(const std::vector<KeyframeState>& states);
 
  private:
   struct Impl;

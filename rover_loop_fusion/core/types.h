@@ -285,6 +285,15 @@ struct VerifierConfig {
   /// confirm_window keyframes after it arrived.
   int confirm_count = 3;
   int confirm_window = 40;
+  /// Revocation (both decisions; 0 = off): a candidate rejected for contradicting the graph
+  /// (innovation_above_bound, score_above_threshold, inconsistent_with_drift) that is
+  /// inconsistent with an accepted loop of its own stretch (the cycle test above) is held as a
+  /// rival instead. Once revoke_group rivals of one stretch agree with each other and outnumber
+  /// the accepted loops of the stretch they contradict, those loops leave the graph and the
+  /// rivals are decided again against it: if at least revoke_group of them pass, the loops are
+  /// revoked and the passing rivals released; otherwise everything is put back and the rivals
+  /// dropped. Rivals not confirmed within confirm_window keyframes are dropped.
+  int revoke_group = 0;
   /// chi2: hold a candidate that passes the tests while the relative position's largest
   /// standard deviation exceeds hold_sigma [m] (the prior alone is too weak to trust a single
   /// candidate); 0 = never hold.

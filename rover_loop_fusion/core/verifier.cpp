@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <sstream>
 
 namespace rover_loop_fusion {
@@ -66,6 +67,8 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   size_t qpos = 0, mpos = 0;
   const std::string bad = graph_.checkLoop(c, &qpos, &mpos);
   if (!bad.empty()) return reject(Reason::kInvalidInput, bad);
+  if (revoked_.count({c.query_index, c.match_index}))
+    return reject(Reason::kUnconfirmed, "this loop was revoked earlier: it is not accepted again");
   const int qseq = graph_.sequenceAt(qpos), mseq = graph_.sequenceAt(mpos);
   if (!graph_.connected(qpos, mpos)) {
     std::ostringstream s;
@@ -105,7 +108,11 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     measured.threshold = n.gate;
     measured.window_size = anchors;
     measured.converged = true;
-    if (!test.passed) return reject(test.reason, test.detail);
+    if (!test.passed) {
+      std::string detail = test.detail;
+      if (holdAsRival(c, qpos, mpos, test.reason, &detail)) return withNumbers(Verdict::Defer(c, detail), measured, t0);
+      return reject(test.reason, test.detail);
+    }
     if (config_.hold_sigma > 0 && n.sigma > config_.hold_sigma) {
       std::ostringstream s;
       s.precision(3);
@@ -124,7 +131,11 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   }
   TrialSolution trial;
   const Check decided = metricDecision(c, qpos, mpos, -1, t0, &measured, &trial);
-  if (!decided.passed) return reject(decided.reason, decided.detail);
+  if (!decided.passed) {
+    std::string detail = decided.detail;
+    if (holdAsRival(c, qpos, mpos, decided.reason, &detail)) return withNumbers(Verdict::Defer(c, detail), measured, t0);
+    return reject(decided.reason, decided.detail);
+  }
   pending_.valid = true;
   pending_.candidate = c;
   pending_.revision = graph_.revision();
@@ -286,7 +297,9 @@ Eigen::Isometry3d Verifier::estimatePose(size_t pos) const {
   return T;
 }
 
-bool Verifier::consistent(const Held& a, const Held& b) const {
+bool Verifier::consistent(const Held& a, const Held& b) const { return cycleTest(a, b) == 1; }
+
+int Verifier::cycleTest(const Held& a, const Held& b) const {
   // The cycle q_a -> m_a -> m_b -> q_b -> q_a through the two loops and the odometry between
   // the matches and between the queries must close: C = Za^-1 (Tma^-1 Tmb) Zb (Tqb^-1 Tqa) = I.
   // Each factor is a 4-DoF relative pose B with its covariance (from the older keyframe to the
@@ -313,7 +326,7 @@ bool Verifier::consistent(const Held& a, const Held& b) const {
   Factor f[4];
   f[0] = Factor{loopPose(a.candidate), true, L};
   f[2] = Factor{loopPose(b.candidate), false, L};
-  if (!odometry(a.match_pos, b.match_pos, &f[1]) || !odometry(b.query_pos, a.query_pos, &f[3])) return false;
+  if (!odometry(a.match_pos, b.match_pos, &f[1]) || !odometry(b.query_pos, a.query_pos, &f[3])) return -1;
   auto value = [](const Factor& x, const Eigen::Vector4d& d) {
     const Eigen::Isometry3d B = perturbed(x.base, d);
     return x.inverted ? Eigen::Isometry3d(B.inverse()) : B;
@@ -331,21 +344,22 @@ bool Verifier::consistent(const Held& a, const Held& b) const {
     for (int d = 0; d < 4; ++d) J.col(d) = (residual(k, h * Eigen::Vector4d::Unit(d)) - r) / h;
     S += J * f[k].cov * J.transpose();
   }
-  return mahalanobis(r, S) <= chiSquareQuantile(config_.gate_probability, 4);
+  return mahalanobis(r, S) <= chiSquareQuantile(config_.gate_probability, 4) ? 1 : 0;
 }
 
-void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, bool no_prior) {
+void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, bool no_prior, bool rival) {
   Held h;
   h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
   h.arrived = graph_.keyframeCount();
   h.no_prior = no_prior;
+  h.rival = rival;
   const size_t window = static_cast<size_t>(config_.confirm_window);
   auto near = [window](size_t x, size_t y) { return (x > y ? x - y : y - x) <= window; };
   bool joined = false;
   for (auto& g : groups_) {
-    if (g.front().no_prior != no_prior || graph_.segmentAt(g.front().query_pos) != graph_.segmentAt(qpos) ||
+    if (g.front().no_prior != no_prior || g.front().rival != rival || graph_.segmentAt(g.front().query_pos) != graph_.segmentAt(qpos) ||
         graph_.segmentAt(g.front().match_pos) != graph_.segmentAt(mpos))
       continue;
     const size_t k = static_cast<size_t>(config_.confirm_count);
@@ -377,11 +391,23 @@ void Verifier::settle() {
   };
   for (size_t i = 0; i < groups_.size();) {
     std::vector<Held>& g = groups_[i];
-    if (g.size() >= k) {
+    if (g.front().rival) {
+      // Confirmed once revoke_group agree and they outnumber the loops they contradict (until
+      // then more rivals may join, or the window runs out).
+      std::vector<LoopCandidate> targets;
+      if (g.size() >= static_cast<size_t>(config_.revoke_group) && g.size() > (targets = rivalTargets(g)).size()) {
+        std::vector<Held> rivals;
+        rivals.swap(g);
+        groups_.erase(groups_.begin() + i);
+        settleRivals(rivals, targets);
+        i = 0;  // the graph may have changed
+        continue;
+      }
+    } else if (g.size() >= k) {
       // Rivals: other held groups of the same query stretch that did not join this one.
       bool blocked = false;
       for (size_t j = 0; j < groups_.size(); ++j) {
-        if (j == i) continue;
+        if (j == i || groups_[j].front().rival) continue;  // rivals contend with accepted loops
         const Held& other = groups_[j].back();
         const size_t dq = other.query_pos > g.back().query_pos ? other.query_pos - g.back().query_pos
                                                                : g.back().query_pos - other.query_pos;
@@ -397,7 +423,7 @@ void Verifier::settle() {
           const Held& other = groups_[j].back();
           const size_t dq = other.query_pos > released.back().query_pos ? other.query_pos - released.back().query_pos
                                                                         : released.back().query_pos - other.query_pos;
-          if (dq <= window) {
+          if (dq <= window && !groups_[j].front().rival) {
             drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
             groups_.erase(groups_.begin() + j);
           } else {
@@ -410,7 +436,11 @@ void Verifier::settle() {
     }
     if (now > g.front().arrived + window) {
       std::ostringstream s;
-      s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
+      if (g.front().rival)
+        s << "a rival of accepted loops, not confirmed by revoke_group=" << config_.revoke_group
+          << " agreeing candidates within confirm_window=" << window << " keyframes: nothing revoked";
+      else
+        s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
       drop(g, s.str());
       groups_.erase(groups_.begin() + i);
       continue;
@@ -468,6 +498,152 @@ void Verifier::release(const std::vector<Held>& group) {
                                                  committed.front()->no_prior ? config_.time_budget_ms : 0.0);
     if (sol.summary.finite) graph_.adopt(sol);
   }
+}
+
+// ---- revocation (revoke_group) ----------------------------------------------------------------
+
+Verifier::Held Verifier::heldFor(const LoopCandidate& c) const {
+  Held h;
+  h.candidate = c;
+  graph_.find(c.query_index, &h.query_pos);
+  graph_.find(c.match_index, &h.match_pos);
+  h.arrived = graph_.keyframeCount();
+  return h;
+}
+
+std::vector<LoopCandidate> Verifier::contradicted(const Held& h) const {
+  const size_t window = static_cast<size_t>(config_.confirm_window);
+  const size_t first = h.query_pos > window ? h.query_pos - window : 0;
+  std::vector<LoopCandidate> out;
+  for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
+    const Held a = heldFor(l);
+    if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) && cycleTest(a, h) == 0) out.push_back(l);
+  }
+  return out;
+}
+
+bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
+  if (config_.revoke_group <= 0) return false;
+  if (reason != Reason::kInnovationAboveBound && reason != Reason::kScoreAboveThreshold &&
+      reason != Reason::kInconsistentWithDrift)
+    return false;
+  Held h = heldFor(c);
+  h.query_pos = qpos;
+  h.match_pos = mpos;
+  const std::vector<LoopCandidate> against = contradicted(h);
+  if (against.empty()) return false;
+  std::ostringstream s;
+  s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
+  for (size_t i = 0; i < against.size() && i < 3; ++i)
+    s << (i ? ", " : "") << against[i].query_index << "->" << against[i].match_index;
+  s << (against.size() > 3 ? ", ..." : "") << "): held as a rival until revoke_group=" << config_.revoke_group
+    << " agree";
+  *detail = s.str();
+  hold(c, qpos, mpos, false, true);
+  return true;
+}
+
+std::vector<LoopCandidate> Verifier::rivalTargets(const std::vector<Held>& group) const {
+  std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
+  for (const Held& h : group)
+    for (const LoopCandidate& l : contradicted(h)) {
+      auto& v = votes[{l.query_index, l.match_index}];
+      v.first = l;
+      ++v.second;
+    }
+  std::vector<LoopCandidate> loops;
+  for (const auto& kv : votes)
+    if (2 * kv.second.second > group.size()) loops.push_back(kv.second.first);
+  return loops;
+}
+
+void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<LoopCandidate>& loops) {
+  pending_.valid = false;  // the graph changes below
+  auto decide = [&](LoopDecision::Kind kind, const LoopCandidate& c, Verdict v) {
+    LoopDecision d;
+    d.kind = kind;
+    d.candidate = c;
+    d.verdict = std::move(v);
+    decisions_.push_back(d);
+  };
+  auto dropAll = [&](const std::vector<const Held*>& hs, const std::string& why) {
+    for (const Held* h : hs) decide(LoopDecision::Kind::kDrop, h->candidate, Verdict::Reject(Reason::kUnconfirmed, h->candidate, why));
+  };
+  std::vector<const Held*> all;
+  for (const Held& h : group) all.push_back(&h);
+
+  std::ostringstream what;
+  what << group.size() << " rivals (loops " << group.front().candidate.query_index << "->"
+       << group.front().candidate.match_index << " .. " << group.back().candidate.query_index << "->"
+       << group.back().candidate.match_index << ") agree with each other";
+  if (loops.empty()) {
+    dropAll(all, what.str() + ", but the accepted loops they contradicted are no longer in the graph");
+    return;
+  }
+
+  // The graph without those loops, and the rivals decided again against it.
+  const std::vector<KeyframeState> saved = graph_.estimates();
+  size_t first = group.front().match_pos, newest = group.front().query_pos;
+  for (const Held& h : group) {
+    first = std::min(first, h.match_pos);
+    newest = std::max(newest, h.query_pos);
+  }
+  for (const LoopCandidate& l : loops) {
+    graph_.removeLoop(l.query_index, l.match_index);
+    size_t m = 0;
+    if (graph_.find(l.match_index, &m)) first = std::min(first, m);
+  }
+  if (usesChi2()) {
+    graph_.updateEstimate(newest, drift_scale_);
+  } else {
+    const TrialSolution back = graph_.solveWindow(first, newest, nullptr, false, config_.max_iterations, 0.0);
+    if (back.summary.finite) graph_.adopt(back);
+  }
+  std::vector<const Held*> passed, failed;
+  for (const Held& h : group) {
+    bool ok = false;
+    if (usesChi2()) {
+      Eigen::Matrix4d C;
+      Chi2Numbers n;
+      ok = graph_.relativeCovariance(h.match_pos, h.query_pos, drift_scale_, &C) &&
+           chi2Test(config_, graph_.innovationVector(h.candidate, h.query_pos, h.match_pos), C + graph_.loopCovariance(), &n)
+               .passed &&
+           graph_.addLoop(h.candidate).ok;
+      if (ok) graph_.updateEstimate(h.query_pos, drift_scale_);
+    } else {
+      Verdict measured;
+      TrialSolution trial;
+      ok = metricDecision(h.candidate, h.query_pos, h.match_pos, -1, Clock::now(), &measured, &trial).passed &&
+           graph_.addLoop(h.candidate).ok;
+      if (ok) graph_.adopt(trial);
+    }
+    (ok ? passed : failed).push_back(&h);
+  }
+
+  if (passed.size() >= static_cast<size_t>(config_.revoke_group) && passed.size() > loops.size()) {
+    std::ostringstream revoked;
+    revoked << what.str() << ", contradict it and pass against the graph without it (" << passed.size() << " of "
+            << group.size() << "; revoke_group=" << config_.revoke_group << ")";
+    for (const LoopCandidate& l : loops) {
+      revoked_.insert({l.query_index, l.match_index});
+      decide(LoopDecision::Kind::kRevoke, l, Verdict::Reject(Reason::kRevoked, l, revoked.str()));
+    }
+    std::ostringstream released;
+    released << what.str() << ": " << loops.size() << " accepted loop(s) they contradicted revoked ("
+             << loops.front().query_index << "->" << loops.front().match_index << (loops.size() > 1 ? ", ..." : "")
+             << ")";
+    for (const Held* h : passed) decide(LoopDecision::Kind::kRelease, h->candidate, Verdict::Accept(h->candidate, released.str()));
+    dropAll(failed, what.str() + " and revoked the loops they contradict, but this one does not pass against the graph without them");
+    return;
+  }
+  // Not enough of them pass: the graph as it was.
+  for (const Held* h : passed) graph_.removeLoop(h->candidate.query_index, h->candidate.match_index);
+  for (const LoopCandidate& l : loops) graph_.addLoop(l);
+  graph_.restoreEstimates(saved);
+  std::ostringstream s;
+  s << what.str() << ", but only " << passed.size() << " of them pass against the graph without the "
+    << loops.size() << " accepted loop(s) they contradict (revoke_group=" << config_.revoke_group << "): nothing revoked";
+  dropAll(all, s.str());
 }
 
 size_t Verifier::keyframeCount() const {

@@ -27,6 +27,9 @@
 //                  verifier's graph: remove it from the host's (loop_fusion: clear has_loop and
 //                  loop_index of the query keyframe and queue an optimisation, which restarts
 //                  from the VIO poses with the loops that remain)
+// Revocation (revoke_group > 0): a candidate that contradicts an accepted loop of its own
+// stretch is held as a rival; a confirmed group of rivals that outnumbers those loops and
+// passes against the graph without them revokes them and is released (types.h).
 // Decisions come in the order they were made; each held candidate gets exactly one kRelease or
 // kDrop; a revoked loop is never released or accepted again.
 //
@@ -42,6 +45,7 @@
 
 #include <chrono>
 #include <mutex>
+#include <set>
 #include <utility>
 #include <vector>
 
@@ -120,6 +124,7 @@ class Verifier {
     size_t query_pos = 0, match_pos = 0;
     size_t arrived = 0;    ///< keyframeCount() when it was held
     bool no_prior = false; ///< held for confirm_without_prior (else for hold_sigma)
+    bool rival = false;    ///< held for contradicting accepted loops (revoke_group)
   };
   bool usesChi2() const;
   /// decision metric from the innovation gate on: fills the numbers and the trial (trials over
@@ -128,7 +133,24 @@ class Verifier {
                        std::chrono::steady_clock::time_point t0, Verdict* measured, TrialSolution* trial);
   void recalibrate();
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
-  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, bool no_prior);
+  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, bool no_prior, bool rival = false);
+  /// revoke_group: holds a candidate rejected for `reason` as a rival if it contradicts an
+  /// accepted loop of its stretch (appends why to *detail); false if it stays rejected.
+  bool holdAsRival(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
+  /// The accepted loops of the stretch of `h` (queries within confirm_window) that the cycle
+  /// test finds inconsistent with it.
+  std::vector<LoopCandidate> contradicted(const Held& h) const;
+  /// The accepted loops a group of rivals contradicts: those of its stretch that most of its
+  /// members are inconsistent with.
+  std::vector<LoopCandidate> rivalTargets(const std::vector<Held>& group) const;
+  /// A confirmed group of rivals that outnumbers the `loops` it contradicts: revoke them and
+  /// release the rivals that pass against the graph without them, or put everything back and
+  /// drop the group.
+  void settleRivals(const std::vector<Held>& group, const std::vector<LoopCandidate>& loops);
+  /// The cycle test of two loops (see consistent()): 1 consistent, 0 not, -1 unknown (the
+  /// odometry between them is not one chain).
+  int cycleTest(const Held& a, const Held& b) const;
+  Held heldFor(const LoopCandidate& c) const;
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
   void release(const std::vector<Held>& group);
@@ -157,6 +179,7 @@ class Verifier {
   std::vector<CalibrationSample> calibration_;
   std::vector<std::vector<Held>> groups_;  ///< held candidates, by revisit
   std::vector<LoopDecision> decisions_;    ///< not yet taken
+  std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
 };
 
 }  // namespace core
