@@ -1437,7 +1437,11 @@ Status KeyframeGraph::updateEstimate(size_t position, double variance_scale) {
   options.variance_scale = variance_scale;
   if (!m.condense(comp, {}, options, &cg, &a))
     return Status::Error("updateEstimate: a covariance of the condensed graph is unusable");
-  if (a.empty()) return Status::Ok();
+  if (a.empty()) {  // no loop left (a revocation): the odometry alone, as before the first loop
+    for (size_t p = 0; p < m.kfs.size(); ++p)
+      if (m.componentOf(p) == comp) m.x[p] = m.stateFromPose(m.kfs[p].vio);
+    return Status::Ok();
+  }
   bool any_fixed = false;
   for (size_t i = 0; i < a.size(); ++i) any_fixed = any_fixed || m.kfs[a[i]].sequence == 0;
   if (!any_fixed) cg.setFixed(0, true);  // the oldest loop end holds the gauge (loop_fusion too)

@@ -600,6 +600,44 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
     if (back.summary.finite) graph_.adopt(back);
   }
   std::vector<const Held*> passed, failed;
+  auto putBack = [&](const std::string& why) {
+    for (const Held* h : passed) graph_.removeLoop(h->candidate.query_index, h->candidate.match_index);
+    for (const LoopCandidate& l : loops) graph_.addLoop(l);
+    graph_.restoreEstimates(saved);
+    dropAll(all, why);
+  };
+
+  // Which of the two fits the graph without them better. The larger group alone is no reason:
+  // a row of look-alikes can outnumber a true revisit. The misfit of a loop: its innovation's
+  // Mahalanobis distance under the drift model (6-DoF: the innovation in metres); the medians of
+  // the two groups compared.
+  auto misfit = [&](const LoopCandidate& c) {
+    size_t q = 0, m = 0;
+    graph_.find(c.query_index, &q);
+    graph_.find(c.match_index, &m);
+    Eigen::Matrix4d C;
+    if (graph_.relativeCovariance(m, q, drift_scale_, &C))
+      return mahalanobis(graph_.innovationVector(c, q, m), C + graph_.loopCovariance());
+    return graph_.innovation(c, q, m);
+  };
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  std::vector<double> fit_loops, fit_rivals;
+  for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
+  for (const Held& h : group) fit_rivals.push_back(misfit(h.candidate));
+  const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
+  if (!(misfit_rivals < misfit_loops)) {
+    std::ostringstream s;
+    s.precision(3);
+    s << what.str() << ", but the " << loops.size() << " accepted loop(s) they contradict fit the graph without "
+      << "them at least as well (median misfit " << misfit_loops << " vs the rivals' " << misfit_rivals
+      << "): nothing revoked";
+    putBack(s.str());
+    return;
+  }
+
   for (const Held& h : group) {
     bool ok = false;
     if (usesChi2()) {
@@ -637,13 +675,10 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
     return;
   }
   // Not enough of them pass: the graph as it was.
-  for (const Held* h : passed) graph_.removeLoop(h->candidate.query_index, h->candidate.match_index);
-  for (const LoopCandidate& l : loops) graph_.addLoop(l);
-  graph_.restoreEstimates(saved);
   std::ostringstream s;
   s << what.str() << ", but only " << passed.size() << " of them pass against the graph without the "
     << loops.size() << " accepted loop(s) they contradict (revoke_group=" << config_.revoke_group << "): nothing revoked";
-  dropAll(all, s.str());
+  putBack(s.str());
 }
 
 size_t Verifier::keyframeCount() const {

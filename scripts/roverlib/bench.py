@@ -35,6 +35,9 @@ def family_arguments(ap, family, jobs=True):
     ap.add_argument("--decision", choices=("metric", "chi2"),
                     help="ROVER's decision mode instead of the shipped YAML's (rover_replay --decision after "
                          "--config; chi2 is 4-DoF only: 6-DoF cases decide metric whatever this says)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a verifier parameter for ROVER's sequential run, after the YAML and --decision "
+                         "(rover_replay --KEY VALUE; e.g. revoke_group=3); repeatable")
     ap.add_argument("--time-limit", type=float, default=600.0,
                     help="seconds per baseline (GNC, DCS, PCM, IPC) and case; a run that hits it is reported")
     if jobs:
@@ -59,13 +62,21 @@ def select_cases(family, a):
 
 
 def decision_args(a):
-    """The rover_replay flags of --decision for ROVER's sequential run (none: the YAML's)."""
-    return ["--decision", a.decision] if a.decision else []
+    """The rover_replay flags of --decision and --set for ROVER's sequential run (none: the YAML's)."""
+    args = ["--decision", a.decision] if a.decision else []
+    for o in getattr(a, "overrides", []):
+        key, sep, value = o.partition("=")
+        if not sep or not key:
+            sys.exit(f"--set {o}: expected KEY=VALUE")
+        args += [f"--{key}", value]
+    return args
 
 
 def decision_note(a):
-    """The summary.md note that says which decision mode ROVER ran with."""
-    return f"ROVER decision: {a.decision} (--decision)" if a.decision else "ROVER decision: the YAML's (decision:)"
+    """The summary.md note that says which decision mode (and --set parameters) ROVER ran with."""
+    note = f"ROVER decision: {a.decision} (--decision)" if a.decision else "ROVER decision: the YAML's (decision:)"
+    overrides = getattr(a, "overrides", [])
+    return note + (f"; --set {' '.join(overrides)}" if overrides else "")
 
 
 def run_limited(fn, args=(), limit_s=600.0):
