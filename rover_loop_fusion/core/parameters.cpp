@@ -90,7 +90,7 @@ std::vector<Parameter> makeTable() {
   // How candidates are decided (core/decision.h).
   Parameter decision = choice("decision", {"metric", "chi2"},
                               "metric: threshold and innovation gate in metres (the paper's method); chi2: in "
-                              "units of drift (drift_* model, gate_probability, lookalike_*; 4-DoF only, 6-DoF uses metric)");
+                              "units of drift (drift_* model, gate_probability, lookalike_*; 6-DoF: on x, y, z, yaw)");
   decision.get = [](const C& c) { return ParameterValue::Text(toString(c.decision)); };
   decision.set = [](C* c, const ParameterValue& v, bool) { parseDecision(v.text, &c->decision); };
   t.push_back(decision);

@@ -217,6 +217,9 @@ struct KeyframeGraph::Impl {
   KeyframeState applyCorrection(const Correction& c, const KeyframeState& s, const Keyframe& kf) const;
   Pose applyCorrection(const Correction& c, const Pose& p) const;
   void setYawPitchRoll(Keyframe& kf) const;
+  /// s.yaw := yaw; 6-DoF: q turned about the world z axis by the change (roll and pitch kept).
+  /// A 6-DoF state's yaw is always that of its q (the chi2 decision works on x, y, z, yaw).
+  void setYaw(KeyframeState& s, double yaw) const;
 
   // ---- edges --------------------------------------------------------------------------
   /// The Ceres cost of an edge with the given measurement, weighted by its information.
@@ -411,8 +414,22 @@ KeyframeState KeyframeGraph::Impl::applyCorrection(const Correction& c, const Ke
     o.q[1] = q.x();
     o.q[2] = q.y();
     o.q[3] = q.z();
+    o.yaw = rotationToYawPitchRoll(q.toRotationMatrix())[0];
   }
   return o;
+}
+
+void KeyframeGraph::Impl::setYaw(KeyframeState& s, double yaw) const {
+  if (!fourDof()) {
+    const Eigen::Quaterniond q = (Eigen::AngleAxisd(wrapAngle(yaw - s.yaw), Eigen::Vector3d::UnitZ()) *
+                                  Eigen::Quaterniond(s.q[0], s.q[1], s.q[2], s.q[3]))
+                                     .normalized();
+    s.q[0] = q.w();
+    s.q[1] = q.x();
+    s.q[2] = q.y();
+    s.q[3] = q.z();
+  }
+  s.yaw = yaw;
 }
 
 Pose KeyframeGraph::Impl::applyCorrection(const Correction& c, const Pose& p) const {
@@ -564,6 +581,10 @@ SolveSummary KeyframeGraph::Impl::solve(Trial& tr, int max_iterations, double ti
                             summary.message.find("time") != std::string::npos);
   o.message = stopped ? callback->stop_reason : summary.message;
   o.finite = true;
+  if (!fourDof())  // the yaw of a 6-DoF state follows its q (setYaw)
+    for (KeyframeState& s : tr.states)
+      s.yaw = rotationToYawPitchRoll(
+          Eigen::Quaterniond(s.q[0], s.q[1], s.q[2], s.q[3]).normalized().toRotationMatrix())[0];
   for (const KeyframeState& s : tr.states) {
     if (!std::isfinite(s.t[0]) || !std::isfinite(s.t[1]) || !std::isfinite(s.t[2]) ||
         !std::isfinite(s.yaw) || !std::isfinite(s.q[0] + s.q[1] + s.q[2] + s.q[3])) {
@@ -851,7 +872,7 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
     KeyframeState s = x[anchors[i]];
     const AnchorState& a = cg.state(i);
     for (int k = 0; k < 3; ++k) s.t[k] = a.p[k];
-    s.yaw = a.yaw;
+    setYaw(s, a.yaw);
     return s;
   };
   auto rigid = [&](size_t from, size_t to, size_t anchor, const KeyframeState& now) {
@@ -899,7 +920,7 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
           const Eigen::Vector3d t = Pa + Rd * (kfs[p].vio.t - kfs[pa].vio.t) + Rd * corr.head<3>();
           KeyframeState& s = x[p];
           for (int k = 0; k < 3; ++k) s.t[k] = t[k];
-          s.yaw = wrapAngle(kfs[p].yaw + dyaw + corr[3]);
+          setYaw(s, wrapAngle(kfs[p].yaw + dyaw + corr[3]));
         }
       }
     }
@@ -1372,7 +1393,7 @@ size_t KeyframeGraph::solveCount() const { return impl_->solves; }
 bool KeyframeGraph::relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
                                    Eigen::Matrix4d* covariance, int* anchors) const {
   const Impl& m = *impl_;
-  if (!m.fourDof() || match_pos >= m.kfs.size() || query_pos >= m.kfs.size()) return false;
+  if (match_pos >= m.kfs.size() || query_pos >= m.kfs.size()) return false;
   const int comp = m.componentOf(query_pos);
   if (m.componentOf(match_pos) != comp) return false;
   CondensedGraph cg;
@@ -1428,7 +1449,6 @@ Eigen::Vector4d KeyframeGraph::innovationVector(const LoopCandidate& c, size_t q
 
 Status KeyframeGraph::updateEstimate(size_t position, double variance_scale) {
   Impl& m = *impl_;
-  if (!m.fourDof()) return Status::Error("updateEstimate: 4-DoF only");
   if (position >= m.kfs.size()) return Status::Error("updateEstimate: unknown position");
   const int comp = m.componentOf(position);
   CondensedGraph cg;

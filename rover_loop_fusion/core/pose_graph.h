@@ -153,7 +153,9 @@ class KeyframeGraph {
   /// Ceres solves run so far (diagnostics for tests and benchmarks).
   size_t solveCount() const;
 
-  // ---- uncertainty (decision chi2; 4-DoF; core/drift.h, core/condensed.h) --------------------
+  // ---- uncertainty (decision chi2; core/drift.h, core/condensed.h) ---------------------------
+  // In x, y, z, yaw; a 6-DoF graph too (its states' yaw follows their q; an update changes
+  // x, y, z and yaw, turning q about the world z axis).
   // Odometry steps carry the drift model's covariance (config drift_*), accepted loops
   // loop_sigma / loop_sigma_yaw. Everything below works on the condensed graph: the loop ends
   // (merged and capped by max_loop_anchors) and the keyframes asked about, joined by chains
@@ -161,7 +163,7 @@ class KeyframeGraph {
 
   /// Covariance (x, y, z, yaw; translation in the match's frame) of the query's pose relative
   /// to the match's through the graph, drift variances times `variance_scale`; the number of
-  /// anchors used in *anchors. False if the two are not tied together (or 6-DoF).
+  /// anchors used in *anchors. False if the two are not tied together.
   bool relativeCovariance(size_t match_pos, size_t query_pos, double variance_scale,
                           Eigen::Matrix4d* covariance, int* anchors = nullptr) const;
   /// Covariance of the pose of keyframe `to` relative to `from` (from < to, one segment) along

@@ -29,7 +29,9 @@ enum class Alignment { kSE3, kSim3 };
 /// kChi2: in units of drift: the innovation's Mahalanobis distance under the uncertainty of the
 ///   relative pose through the graph (drift model + accepted loops) against a chi-square
 ///   quantile, and the look-alike test (no look-alike place explains the candidate better).
-///   4-DoF only for now: a 6-DoF (VO) verifier decides kMetric whatever this says.
+///   6-DoF (VO): the same test on x, y, z and yaw of the 6-DoF poses (the drift model has no
+///   roll and pitch: their effect on the position belongs in drift_xy / drift_z), and the
+///   estimate is updated in those four (roll and pitch stay the VO's).
 enum class Decision { kMetric, kChi2 };
 
 /// Why a verdict came out the way it did. Exactly one per verdict.

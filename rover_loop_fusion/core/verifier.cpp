@@ -730,7 +730,7 @@ double Verifier::driftScale() const {
 }
 
 bool Verifier::usesChi2() const {
-  return config_.decision == Decision::kChi2 && config_.mode == Mode::kFourDof;
+  return config_.decision == Decision::kChi2;
 }
 
 void Verifier::recalibrate() {

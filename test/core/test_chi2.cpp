@@ -146,6 +146,50 @@ TEST(Chi2Verifier, NearLookalikesStayOutTrueLoopsGetIn) {
   }
 }
 
+TEST(Chi2Verifier, SixDofDecidesAsFourDofOnALevelBody) {
+  // On a level body roll and pitch are zero: a 6-DoF (VO) verifier deciding chi2 on x, y, z and
+  // yaw must give the 4-DoF verifier's verdicts, numbers and estimate, while its states carry
+  // full quaternions (updated by a turn about the world z axis).
+  const sim::LapsOptions o = corridorOptions(7);
+  const sim::Scene s = sim::makeLapsScene(o);
+  core::VerifierConfig c4 = chi2Config(o), c6 = c4;
+  c6.mode = core::Mode::kSixDof;
+  Verifier v4(c4), v6(c6);
+  size_t next = 0;
+  int accepted = 0, rejected = 0;
+  for (const sim::SimCandidate& sc : s.candidates) {
+    for (; next < s.keyframes.size() && s.keyframes[next].index <= sc.candidate.query_index; ++next) {
+      const sim::SimKeyframe& kf = s.keyframes[next];
+      ASSERT_TRUE(v4.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
+      ASSERT_TRUE(v6.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
+    }
+    const Verdict a = v4.verify(sc.candidate), b = v6.verify(sc.candidate);
+    ASSERT_EQ(a.accepted, b.accepted) << sc.candidate.query_index << " -> " << sc.candidate.match_index << ": 4-DoF "
+                                      << a.detail << " | 6-DoF " << b.detail;
+    EXPECT_EQ(a.reason, b.reason);
+    EXPECT_NEAR(a.score, b.score, 1e-6 * std::max(1.0, std::abs(a.score)));
+    if (a.accepted) {
+      ++accepted;
+      ASSERT_TRUE(v4.commit(sc.candidate).ok);
+      ASSERT_TRUE(v6.commit(sc.candidate).ok);
+    } else {
+      ++rejected;
+    }
+  }
+  EXPECT_GT(accepted, 10);
+  EXPECT_GT(rejected, 5);
+  const std::vector<core::Pose> e4 = estimates(v4), e6 = estimates(v6);
+  ASSERT_EQ(e4.size(), e6.size());
+  double worst_t = 0, worst_q = 0;
+  for (size_t i = 0; i < e4.size(); ++i) {
+    worst_t = std::max(worst_t, (e4[i].t - e6[i].t).norm());
+    worst_q = std::max(worst_q, e4[i].q.angularDistance(e6[i].q));
+  }
+  EXPECT_LT(worst_t, 1e-6);
+  EXPECT_LT(worst_q, 1e-8);
+  EXPECT_GT((e6.back().t - s.keyframes.back().vio.t).norm(), 0.05) << "the loops moved the estimate";
+}
+
 TEST(Chi2Verifier, WithoutTheLookalikeTestAGateThatTrustsTooMuchDriftLetsLookalikesIn) {
   // The same scenes with a drift model 5x too pessimistic and no look-alike test: the gate
   // alone cannot tell a look-alike 1.5 m away from drift it believes is metres.
