@@ -610,19 +610,16 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
   // Which of the two fits the graph without them better, decisively. The larger group alone is
   // no reason: a row of look-alikes can outnumber a true revisit, and after long drift the
   // prior cannot tell them apart. The misfit of a loop: its innovation's squared Mahalanobis
-  // distance under the drift model; the rivals' median must be lower than the loops' by
-  // lookalike_margin (2 ln of the likelihood ratio, as the look-alike test). 6-DoF (no
-  // covariance through the graph): the innovation in metres, the rivals' at most half.
-  bool d2 = true;
+  // distance under the drift model (both decisions, 4-DoF and 6-DoF); the rivals' median must
+  // be lower than the loops' by lookalike_margin (2 ln of the likelihood ratio, as the
+  // look-alike test). Without a covariance nothing is revoked.
   auto misfit = [&](const LoopCandidate& c) {
     size_t q = 0, m = 0;
-    graph_.find(c.query_index, &q);
-    graph_.find(c.match_index, &m);
     Eigen::Matrix4d C;
-    if (d2 && graph_.relativeCovariance(m, q, drift_scale_, &C))
-      return mahalanobis(graph_.innovationVector(c, q, m), C + graph_.loopCovariance());
-    d2 = false;
-    return graph_.innovation(c, q, m);
+    if (!graph_.find(c.query_index, &q) || !graph_.find(c.match_index, &m) ||
+        !graph_.relativeCovariance(m, q, drift_scale_, &C))
+      return std::numeric_limits<double>::infinity();
+    return mahalanobis(graph_.innovationVector(c, q, m), C + graph_.loopCovariance());
   };
   auto median = [](std::vector<double> v) {
     std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
@@ -631,21 +628,13 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
   std::vector<double> fit_loops, fit_rivals;
   for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
   for (const Held& h : group) fit_rivals.push_back(misfit(h.candidate));
-  if (!d2) {  // one without a covariance: all in metres
-    fit_loops.clear();
-    fit_rivals.clear();
-    for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
-    for (const Held& h : group) fit_rivals.push_back(misfit(h.candidate));
-  }
   const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
-  const bool decisive = d2 ? misfit_rivals + config_.lookalike_margin < misfit_loops : 2 * misfit_rivals < misfit_loops;
-  if (!decisive) {
+  if (!(std::isfinite(misfit_loops) && misfit_rivals + config_.lookalike_margin < misfit_loops)) {
     std::ostringstream s;
     s.precision(3);
     s << what.str() << ", but they do not fit the graph without the " << loops.size()
-      << " accepted loop(s) they contradict decisively better than those loops (median "
-      << (d2 ? "squared Mahalanobis distance " : "innovation [m] ") << misfit_rivals << " vs " << misfit_loops
-      << (d2 ? ", lookalike_margin " : ", half needed") << (d2 ? std::to_string(config_.lookalike_margin) : "")
+      << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
+      << "distance " << misfit_rivals << " vs " << misfit_loops << ", lookalike_margin " << config_.lookalike_margin
       << "): nothing revoked";
     putBack(s.str());
     return;
