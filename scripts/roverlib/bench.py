@@ -34,7 +34,7 @@ def family_arguments(ap, family, jobs=True):
     ap.add_argument("--out", default=os.path.join(RESULTS, family))
     ap.add_argument("--decision", choices=("metric", "chi2"),
                     help="ROVER's decision mode instead of the shipped YAML's (rover_replay --decision after "
-                         "--config; chi2 is 4-DoF only: 6-DoF cases decide metric whatever this says)")
+                         "--config; 6-DoF cases too: chi2 then tests x, y, z and yaw)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="a verifier parameter for ROVER's sequential run, after the YAML and --decision "
                          "(rover_replay --KEY VALUE; e.g. revoke_group=3); repeatable")
