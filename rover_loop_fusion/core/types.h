@@ -291,10 +291,12 @@ struct VerifierConfig {
   /// (innovation_above_bound, score_above_threshold, inconsistent_with_drift) that is
   /// inconsistent with an accepted loop of its own stretch (the cycle test above) is held as a
   /// rival instead. Once revoke_group rivals of one stretch agree with each other and outnumber
-  /// the accepted loops of the stretch they contradict, those loops leave the graph and the
-  /// rivals are decided again against it: if at least revoke_group of them pass, the loops are
-  /// revoked and the passing rivals released; otherwise everything is put back and the rivals
-  /// dropped. Rivals not confirmed within confirm_window keyframes are dropped.
+  /// the accepted loops of the stretch they contradict, those loops leave the graph; if the
+  /// rivals then fit it decisively better than the loops (median squared Mahalanobis distance
+  /// of the innovations lower by lookalike_margin) and at least revoke_group of them pass the
+  /// decision, the loops are revoked and the passing rivals released; otherwise everything is
+  /// put back and the rivals dropped. Rivals not confirmed within confirm_window keyframes are
+  /// dropped.
   int revoke_group = 0;
   /// chi2: hold a candidate that passes the tests while the relative position's largest
   /// standard deviation exceeds hold_sigma [m] (the prior alone is too weak to trust a single

@@ -63,8 +63,14 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   auto reject = [&](Reason reason, std::string detail) {
     return withNumbers(Verdict::Reject(reason, c, std::move(detail)), measured, t0);
   };
-
   size_t qpos = 0, mpos = 0;
+  // A failed test rejects, unless the candidate is held as a rival of accepted loops (revoke_group).
+  auto rejectOrHold = [&](const Check& failed) {
+    std::string detail = failed.detail;
+    if (holdAsRival(c, qpos, mpos, failed.reason, &detail)) return withNumbers(Verdict::Defer(c, detail), measured, t0);
+    return reject(failed.reason, failed.detail);
+  };
+
   const std::string bad = graph_.checkLoop(c, &qpos, &mpos);
   if (!bad.empty()) return reject(Reason::kInvalidInput, bad);
   if (revoked_.count({c.query_index, c.match_index}))
@@ -108,11 +114,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     measured.threshold = n.gate;
     measured.window_size = anchors;
     measured.converged = true;
-    if (!test.passed) {
-      std::string detail = test.detail;
-      if (holdAsRival(c, qpos, mpos, test.reason, &detail)) return withNumbers(Verdict::Defer(c, detail), measured, t0);
-      return reject(test.reason, test.detail);
-    }
+    if (!test.passed) return rejectOrHold(test);
     if (config_.hold_sigma > 0 && n.sigma > config_.hold_sigma) {
       std::ostringstream s;
       s.precision(3);
@@ -131,11 +133,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   }
   TrialSolution trial;
   const Check decided = metricDecision(c, qpos, mpos, -1, t0, &measured, &trial);
-  if (!decided.passed) {
-    std::string detail = decided.detail;
-    if (holdAsRival(c, qpos, mpos, decided.reason, &detail)) return withNumbers(Verdict::Defer(c, detail), measured, t0);
-    return reject(decided.reason, decided.detail);
-  }
+  if (!decided.passed) return rejectOrHold(decided);
   pending_.valid = true;
   pending_.candidate = c;
   pending_.revision = graph_.revision();
@@ -527,7 +525,8 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   if (reason != Reason::kInnovationAboveBound && reason != Reason::kScoreAboveThreshold &&
       reason != Reason::kInconsistentWithDrift)
     return false;
-  Held h = heldFor(c);
+  Held h;
+  h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
   const std::vector<LoopCandidate> against = contradicted(h);
