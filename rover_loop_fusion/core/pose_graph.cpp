@@ -1429,6 +1429,12 @@ bool KeyframeGraph::chainCovariance(size_t from, size_t to, double variance_scal
 
 int KeyframeGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
 
+bool KeyframeGraph::vioAt(size_t position, Pose* pose) const {
+  if (position >= impl_->kfs.size()) return false;
+  *pose = impl_->kfs[position].vio;
+  return true;
+}
+
 bool KeyframeGraph::estimateAt(size_t position, Pose* pose) const {
   if (position >= impl_->kfs.size()) return false;
   *pose = impl_->poseFromState(impl_->x[position], impl_->kfs[position]);

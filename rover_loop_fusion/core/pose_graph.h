@@ -115,6 +115,9 @@ class KeyframeGraph {
   bool estimate(int64_t index, Pose* pose) const;
   /// X of the keyframe at `position`; false if there is none.
   bool estimateAt(size_t position, Pose* pose) const;
+  /// The VIO pose of the keyframe at `position` (after any sequence anchoring shift); false if
+  /// there is none.
+  bool vioAt(size_t position, Pose* pose) const;
   std::vector<TrajectoryPoint> trajectory() const;
   /// |t_meas - t_X|: where the candidate puts the query in the match's frame vs where X has it [m].
   double innovation(const LoopCandidate& c, size_t query_pos, size_t match_pos) const;

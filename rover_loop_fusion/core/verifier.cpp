@@ -286,6 +286,15 @@ Eigen::Vector4d cycleResidual(const Eigen::Isometry3d& C) {
 
 }  // namespace
 
+Eigen::Isometry3d Verifier::vioPose(size_t pos) const {
+  Pose p;
+  graph_.vioAt(pos, &p);
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = p.q.toRotationMatrix();
+  T.translation() = p.t;
+  return T;
+}
+
 Eigen::Isometry3d Verifier::estimatePose(size_t pos) const {
   Pose p;
   graph_.estimateAt(pos, &p);
@@ -297,7 +306,7 @@ Eigen::Isometry3d Verifier::estimatePose(size_t pos) const {
 
 bool Verifier::consistent(const Held& a, const Held& b) const { return cycleTest(a, b) == 1; }
 
-int Verifier::cycleTest(const Held& a, const Held& b) const {
+int Verifier::cycleTest(const Held& a, const Held& b, bool from_vio) const {
   // The cycle q_a -> m_a -> m_b -> q_b -> q_a through the two loops and the odometry between
   // the matches and between the queries must close: C = Za^-1 (Tma^-1 Tmb) Zb (Tqb^-1 Tqa) = I.
   // Each factor is a 4-DoF relative pose B with its covariance (from the older keyframe to the
@@ -316,7 +325,8 @@ int Verifier::cycleTest(const Held& a, const Held& b) const {
   };
   auto odometry = [&](size_t from, size_t to, Factor* f) {  // the factor T_from^-1 T_to
     const size_t lo = std::min(from, to), hi = std::max(from, to);
-    f->base = estimatePose(lo).inverse() * estimatePose(hi);
+    f->base = from_vio ? Eigen::Isometry3d(vioPose(lo).inverse() * vioPose(hi))
+                       : Eigen::Isometry3d(estimatePose(lo).inverse() * estimatePose(hi));
     f->inverted = from > to;
     return graph_.chainCovariance(lo, hi, drift_scale_, &f->cov);
   };
@@ -515,7 +525,8 @@ std::vector<LoopCandidate> Verifier::contradicted(const Held& h) const {
   std::vector<LoopCandidate> out;
   for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
     const Held a = heldFor(l);
-    if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) && cycleTest(a, h) == 0) out.push_back(l);
+    // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
+    if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) && cycleTest(a, h, true) == 0) out.push_back(l);
   }
   return out;
 }
@@ -610,8 +621,9 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
   // no reason: a row of look-alikes can outnumber a true revisit, and after long drift the
   // prior cannot tell them apart. The misfit of a loop: its innovation's squared Mahalanobis
   // distance under the drift model (both decisions, 4-DoF and 6-DoF); the rivals' median must
-  // be lower than the loops' by lookalike_margin (2 ln of the likelihood ratio, as the
-  // look-alike test). Without a covariance nothing is revoked.
+  // be within the chi-square gate (gate_probability: they fit at all) and lower than the loops'
+  // by lookalike_margin (2 ln of the likelihood ratio, as the look-alike test). Without a
+  // covariance nothing is revoked.
   auto misfit = [&](const LoopCandidate& c) {
     size_t q = 0, m = 0;
     Eigen::Matrix4d C;
@@ -628,13 +640,14 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
   for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
   for (const Held& h : group) fit_rivals.push_back(misfit(h.candidate));
   const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
-  if (!(std::isfinite(misfit_loops) && misfit_rivals + config_.lookalike_margin < misfit_loops)) {
+  const double gate = chiSquareQuantile(config_.gate_probability, 4);
+  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.lookalike_margin < misfit_loops)) {
     std::ostringstream s;
     s.precision(3);
     s << what.str() << ", but they do not fit the graph without the " << loops.size()
       << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
-      << "distance " << misfit_rivals << " vs " << misfit_loops << ", lookalike_margin " << config_.lookalike_margin
-      << "): nothing revoked";
+      << "distance " << misfit_rivals << " vs " << misfit_loops << "; needed: within the gate " << gate
+      << " and lower by lookalike_margin " << config_.lookalike_margin << "): nothing revoked";
     putBack(s.str());
     return;
   }

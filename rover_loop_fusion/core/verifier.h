@@ -148,14 +148,17 @@ class Verifier {
   /// drop the group.
   void settleRivals(const std::vector<Held>& group, const std::vector<LoopCandidate>& loops);
   /// The cycle test of two loops (see consistent()): 1 consistent, 0 not, -1 unknown (the
-  /// odometry between them is not one chain).
-  int cycleTest(const Held& a, const Held& b) const;
+  /// odometry between them is not one chain). The odometry factors are the relative poses of X,
+  /// or of the VIO poses (`from_vio`: what the chain covariance describes, and what false
+  /// loops already accepted have not bent).
+  int cycleTest(const Held& a, const Held& b, bool from_vio = false) const;
   Held heldFor(const LoopCandidate& c) const;
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
   void release(const std::vector<Held>& group);
   bool consistent(const Held& a, const Held& b) const;
   Eigen::Isometry3d estimatePose(size_t position) const;
+  Eigen::Isometry3d vioPose(size_t position) const;
   /// The X* of the last verify() that accepted, for commit() to keep.
   struct Pending {
     bool valid = false;

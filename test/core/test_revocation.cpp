@@ -284,3 +284,29 @@ TEST(Revocation, ALargerRowOfLookalikesDoesNotRevokeTheTrueLoopsItContradicts) {
     EXPECT_EQ(v.loopCount(), 2u) << "the true loops stay";
   }
 }
+
+TEST(Revocation, RivalsOutsideTheDriftModelRevokeNothingEvenWhereTheLoopsFitWorse) {
+  // The metric decision loosened (innovation gate off, a threshold that grows 0.05 m per metre
+  // of path) lets a row 6 m off in; a second row 5 m off the other way contradicts it and,
+  // without the first row, passes that loose decision and fits better than the first row. But
+  // 5 m is outside what the drift model allows over one lap: both rows are wrong, nothing is revoked
+  // (a false row must not revoke another false row).
+  const sim::LapsOptions o = corridor();
+  const sim::Scene s = sim::makeLapsScene(o);
+  Stretch st = makeStretch(s, 2, 6, 12);
+  for (core::LoopCandidate& c : st.trues) c.match_index -= 10;  // the second row, 5 m off
+  core::VerifierConfig c = metric();
+  c.max_innovation = 0;  // no gate
+  c.threshold = 0.3;
+  c.threshold_per_metre = 0.05;
+  c.revoke_group = 3;
+  Verifier v(c);
+  const Outcome r = run(c, s, st, &v);
+  std::string details;
+  for (const LoopDecision& d : r.decisions) details += std::string("\n  ") + toString(d.kind) + ": " + d.verdict.detail;
+  ASSERT_GE(r.deferred, 3) << "the second row is held as rivals (accepted " << r.accepted << ", rejected " << r.rejected << ")" << details;
+  EXPECT_EQ(count(r, LoopDecision::Kind::kRevoke), 0) << details;
+  EXPECT_EQ(count(r, LoopDecision::Kind::kRelease), 0) << details;
+  ASSERT_FALSE(r.decisions.empty());
+  EXPECT_NE(r.decisions.front().verdict.detail.find("within the gate"), std::string::npos) << details;
+}
