@@ -292,8 +292,9 @@ struct VerifierConfig {
   /// inconsistent with an accepted loop of its own stretch (the cycle test above) is held as a
   /// rival instead. Once revoke_group rivals of one stretch agree with each other and outnumber
   /// the accepted loops of the stretch they contradict, those loops leave the graph; if the
-  /// rivals then fit it decisively better than the loops (median squared Mahalanobis distance
-  /// of the innovations lower by lookalike_margin) and at least revoke_group of them pass the
+  /// rivals then fit it (median squared Mahalanobis distance of the innovations within the
+  /// gate) decisively better than the loops (lower by lookalike_margin) and at least
+  /// revoke_group of them pass the
   /// decision, the loops are revoked and the passing rivals released; otherwise everything is
   /// put back and the rivals dropped. Rivals not confirmed within confirm_window keyframes are
   /// dropped.
