@@ -286,18 +286,12 @@ Eigen::Vector4d cycleResidual(const Eigen::Isometry3d& C) {
 
 }  // namespace
 
-Eigen::Isometry3d Verifier::vioPose(size_t pos) const {
+Eigen::Isometry3d Verifier::poseAt(size_t pos, bool vio) const {
   Pose p;
-  graph_.vioAt(pos, &p);
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = p.q.toRotationMatrix();
-  T.translation() = p.t;
-  return T;
-}
-
-Eigen::Isometry3d Verifier::estimatePose(size_t pos) const {
-  Pose p;
-  graph_.estimateAt(pos, &p);
+  if (vio)
+    graph_.vioAt(pos, &p);
+  else
+    graph_.estimateAt(pos, &p);
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.linear() = p.q.toRotationMatrix();
   T.translation() = p.t;
@@ -325,8 +319,7 @@ int Verifier::cycleTest(const Held& a, const Held& b, bool from_vio) const {
   };
   auto odometry = [&](size_t from, size_t to, Factor* f) {  // the factor T_from^-1 T_to
     const size_t lo = std::min(from, to), hi = std::max(from, to);
-    f->base = from_vio ? Eigen::Isometry3d(vioPose(lo).inverse() * vioPose(hi))
-                       : Eigen::Isometry3d(estimatePose(lo).inverse() * estimatePose(hi));
+    f->base = poseAt(lo, from_vio).inverse() * poseAt(hi, from_vio);
     f->inverted = from > to;
     return graph_.chainCovariance(lo, hi, drift_scale_, &f->cov);
   };

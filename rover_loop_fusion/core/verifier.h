@@ -157,8 +157,8 @@ class Verifier {
   void settle();
   void release(const std::vector<Held>& group);
   bool consistent(const Held& a, const Held& b) const;
-  Eigen::Isometry3d estimatePose(size_t position) const;
-  Eigen::Isometry3d vioPose(size_t position) const;
+  /// X (or the VIO pose) of the keyframe at `position`.
+  Eigen::Isometry3d poseAt(size_t position, bool vio = false) const;
   /// The X* of the last verify() that accepted, for commit() to keep.
   struct Pending {
     bool valid = false;
