@@ -153,6 +153,20 @@ def test_decision_flag_reaches_rover_replay(tmp_path):
     _summary(tmp_path / "summary.csv", "poc")
 
 
+def test_set_parameters_become_rover_replay_flags():
+    """--set KEY=VALUE (repeatable) reaches ROVER's sequential replay after --decision, and the
+    summary note names it; a malformed one stops the run."""
+    import argparse
+    ap = argparse.ArgumentParser()
+    bench.family_arguments(ap, "poc")
+    a = ap.parse_args(["--decision", "chi2", "--set", "revoke_group=3", "--set", "threshold=0.3"])
+    assert bench.decision_args(a) == ["--decision", "chi2", "--revoke_group", "3", "--threshold", "0.3"]
+    assert "--set revoke_group=3 threshold=0.3" in bench.decision_note(a)
+    assert bench.decision_args(ap.parse_args([])) == []
+    with pytest.raises(SystemExit):
+        bench.decision_args(ap.parse_args(["--set", "revoke_group"]))
+
+
 def test_agreement_quick(tmp_path):
     # The condensed trial against the full-window trial (issue 13): every family and comparison
     # gets a summary row over real candidates, and on the same graph and X (same-state) the two
