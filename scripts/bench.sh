@@ -7,6 +7,7 @@
 #   ./scripts/bench.sh all [--quick]          poc, real, posegraph, cost, one after the other
 #   ./scripts/bench.sh agreement [--quick] ... the condensed trial's decisions against the full trial's
 #                                             on every family (scripts/bench/agreement.py)
+#   ./scripts/bench.sh identity build|run|compare  every family's verdicts, timing aside, for two builds
 #   ./scripts/bench.sh sweep ...              scripts/threshold_sweep.py (tuning cases only)
 #   ./scripts/bench.sh evaluate ...           scripts/evaluate.py (verdict log + labels -> AP, MR, ...)
 #   ./scripts/bench.sh diagnostics DIR        scripts/verdict_diagnostics.py (why decisions went wrong)
@@ -16,8 +17,8 @@
 set -euo pipefail
 family="${1:-}"
 case "$family" in
-  poc|real|posegraph|cost|long_replay|agreement|all|sweep|evaluate|diagnostics) shift ;;
-  *) echo "usage: $0 poc|real|posegraph|cost|long_replay|agreement|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
+  poc|real|posegraph|cost|long_replay|agreement|identity|all|sweep|evaluate|diagnostics) shift ;;
+  *) echo "usage: $0 poc|real|posegraph|cost|long_replay|agreement|identity|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
 esac
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 source "$ROVER_ROOT/scripts/venv.sh"
