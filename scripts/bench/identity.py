@@ -28,7 +28,8 @@ import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the family scripts beside this one
+sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # roverlib
 import poc  # noqa: E402
 import posegraph  # noqa: E402
 import real  # noqa: E402
