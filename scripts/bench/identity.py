@@ -24,6 +24,7 @@ import filecmp
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -94,6 +95,7 @@ def replay_one(job):
     if os.path.exists(os.path.join(d, f"{config}-{protocol}.csv")):  # done by an interrupted run
         return None
     tmp = os.path.join(d, f".{config}-{protocol}")
+    shutil.rmtree(tmp, ignore_errors=True)  # left by an interrupted run
     cmd = [replay, "--scenario", entry["dir"], "--out", tmp, "--protocol", protocol, "--quiet"] + \
         entry["flags"] + CONFIGS[config]
     env = dict(os.environ)
@@ -107,7 +109,7 @@ def replay_one(job):
         src = os.path.join(tmp, f"{name}.tum")
         if os.path.exists(src):
             os.replace(src, os.path.join(d, f"{config}-{protocol}-{name}.tum"))
-    subprocess.run(["rm", "-rf", tmp])
+    shutil.rmtree(tmp)
     return None
 
 
