@@ -3,7 +3,6 @@
 #include "rover_loop_fusion/core/decision.h"
 #include "rover_loop_fusion/core/geometry.h"
 
-#include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 
 #include <algorithm>
@@ -43,7 +42,9 @@ Verdict withNumbers(Verdict decided, const Verdict& measured, Clock::time_point 
 Verifier::Verifier(const VerifierConfig& config)
     : config_error_(config.validate()),
       config_(config_error_.empty() ? config : VerifierConfig()),
-      graph_(config_) {}
+      graph_(config_),
+      rule_(makeDecisionRule(config_, graph_)),
+      held_(config_) {}
 
 Verifier::~Verifier() = default;
 
@@ -51,7 +52,7 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
                              const Eigen::Quaterniond& q) {
   std::lock_guard<std::mutex> lock(mutex_);
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q);
-  if (!groups_.empty()) settle();
+  if (!held_.empty()) settle();
   return s;
 }
 
@@ -86,7 +87,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
       s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; ";
     if (config_.confirm_without_prior) {
       s << "held until " << config_.confirm_count << " candidates between them agree (confirm_without_prior)";
-      hold(c, qpos, mpos, true);
+      hold(c, qpos, mpos, HoldKind::kNoPrior);
       return withNumbers(Verdict::Defer(c, s.str()), measured, t0);
     }
     s << (config_.accept_without_prior ? "accepted by policy (accept_without_prior)"
@@ -99,73 +100,18 @@ Verdict Verifier::verify(const LoopCandidate& c) {
     return reject(Reason::kInvalidInput,
                   "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
 
-  if (usesChi2()) {
-    measured.innovation = graph_.innovation(c, qpos, mpos);
-    // (No path length: its Dijkstra over every loop end would be the one cost that grows with
-    // the run; the chi2 decision does not use it.)
-    Eigen::Matrix4d C;
-    int anchors = 0;
-    if (!graph_.relativeCovariance(mpos, qpos, drift_scale_, &C, &anchors))
-      return reject(Reason::kInvalidInput, "no covariance of the relative pose (the condensed graph is singular)");
-    const Eigen::Vector4d nu = graph_.innovationVector(c, qpos, mpos);
-    Chi2Numbers n;
-    const Check test = chi2Test(config_, nu, C + graph_.loopCovariance(), &n);
-    measured.score = n.d2;
-    measured.threshold = n.gate;
-    measured.window_size = anchors;
-    measured.converged = true;
-    if (!test.passed) return rejectOrHold(test);
-    if (config_.hold_sigma > 0 && n.sigma > config_.hold_sigma) {
-      std::ostringstream s;
-      s.precision(3);
-      s << std::fixed << test.detail << "; held: the prior alone is too weak (std " << n.sigma << " m > hold_sigma "
-        << config_.hold_sigma << " m) until " << config_.confirm_count << " candidates of this revisit agree";
-      hold(c, qpos, mpos, false);
-      return withNumbers(Verdict::Defer(c, s.str()), measured, t0);
-    }
-    pending_ = Pending();
-    pending_.valid = true;
-    pending_.candidate = c;
-    pending_.revision = graph_.revision();
-    pending_.innovation = nu;
-    pending_.chain_covariance = C / drift_scale_;
-    return withNumbers(Verdict::Accept(c, test.detail), measured, t0);
+  Decided decided;
+  const RuleOutcome out = rule_->decide(c, qpos, mpos, t0, &measured, &decided);
+  if (!out.check.passed) return rejectOrHold(out.check);
+  if (out.hold) {
+    hold(c, qpos, mpos, HoldKind::kWeakPrior);
+    return withNumbers(Verdict::Defer(c, out.check.detail), measured, t0);
   }
-  TrialSolution trial;
-  const Check decided = metricDecision(c, qpos, mpos, -1, t0, &measured, &trial);
-  if (!decided.passed) return rejectOrHold(decided);
   pending_.valid = true;
   pending_.candidate = c;
   pending_.revision = graph_.revision();
-  pending_.solution = std::move(trial);
-  return withNumbers(Verdict::Accept(c, decided.detail), measured, t0);
-}
-
-Check Verifier::metricDecision(const LoopCandidate& c, size_t qpos, size_t mpos, int condense_min_window,
-                               std::chrono::steady_clock::time_point t0, Verdict* measured, TrialSolution* trial) {
-  measured->innovation = graph_.innovation(c, qpos, mpos);
-  measured->path_length = graph_.pathLength(mpos, qpos);
-  measured->threshold = scoreThreshold(config_, measured->path_length);
-  const Check gate = innovationGate(config_, measured->innovation, measured->path_length);
-  if (!gate.passed) return gate;
-
-  // The budget counts from the call: what the checks above took is spent.
-  const double budget_left =
-      config_.time_budget_ms > 0 ? std::max(1e-3, config_.time_budget_ms - msSince(t0)) : 0.0;
-  *trial = graph_.solveWindow(mpos, qpos, &c, config_.robust_candidate, config_.max_iterations, budget_left,
-                              condense_min_window);
-  const SolveSummary& o = trial->summary;
-  measured->iterations = o.iterations;
-  measured->solve_ms = o.solve_ms;
-  measured->converged = o.converged && o.finite;
-  // Scored: the keyframes that may move (sequence 0 is a fixed prior map).
-  Eigen::Matrix3Xd before, after;
-  measured->window_size = graph_.scoredPositions(*trial, &before, &after);
-  if (o.finite) measured->score = deformationScore(before, after, config_.alignment);
-
-  Check score = scoreTest(o, measured->score, measured->threshold, measured->window_size, config_.time_budget_ms);
-  if (trial->condensed) score.detail += " (" + o.message + ")";
-  return score;
+  pending_.decided = std::move(decided);
+  return withNumbers(Verdict::Accept(c, out.check.detail), measured, t0);
 }
 
 std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int condense_min_window) {
@@ -174,21 +120,21 @@ std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int 
   std::string why = graph_.checkLoop(c, &qpos, &mpos);
   if (why.empty() && !graph_.connected(qpos, mpos)) why = "no trajectory prior: no trial";
   if (why.empty() && graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) why = "both in sequence 0";
-  if (why.empty() && usesChi2()) why = "decision chi2: no trial";
+  if (why.empty() && config_.decision != Decision::kMetric) why = "decision chi2: no trial";
   if (!why.empty()) {
     const Verdict v = Verdict::Reject(Reason::kInvalidInput, c, why);
     return {v, v};
   }
-  auto decide = [&](int condense) {
+  auto trialVerdict = [&](int condense) {
     const auto t0 = Clock::now();
     Verdict measured;
     TrialSolution trial;
-    const Check d = metricDecision(c, qpos, mpos, condense, t0, &measured, &trial);
+    const Check d = metricDecision(config_, graph_, c, qpos, mpos, condense, t0, &measured, &trial);
     Verdict v = d.passed ? Verdict::Accept(c, d.detail) : Verdict::Reject(d.reason, c, d.detail);
     return withNumbers(v, measured, t0);
   };
-  const Verdict full = decide(0);
-  return {full, decide(condense_min_window)};
+  const Verdict full = trialVerdict(0);
+  return {full, trialVerdict(condense_min_window)};
 }
 
 Status Verifier::commit(const LoopCandidate& c) {
@@ -210,34 +156,23 @@ Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
   const Status added = graph_.addLoop(c);
   if (!added) return Status::Error("commit refused: " + added.message);
   pending_.valid = false;
-  if (usesChi2()) {
-    if (reuse) {
-      calibration_.push_back({p.innovation, p.chain_covariance});
-      if (config_.calibrate_drift) recalibrate();
-    }
-    if (!update_estimate) return Status::Ok();
-    const Status updated = graph_.updateEstimate(qpos, drift_scale_);
-    if (!updated) return Status::Warning("loop committed but the update of the estimate failed (" + updated.message + ")");
-    return Status::Ok();
-  }
+  Status updated;
   if (reuse) {
-    graph_.adopt(p.solution);
-    return Status::Ok();
+    rule_->learn(p.decided);
+    updated = rule_->adoptDecided(p.decided, qpos, update_estimate);
+  } else {
+    if (!update_estimate) return Status::Ok();  // the caller updates X once for a group (release())
+    // A loop accepted without a prior is committed in the host's loop-closure path, right after
+    // its verdict: bounded like a verification. Other loops committed without their accepting
+    // verify() (rover_replay's oracle protocol, overrides) are solved to convergence, so that
+    // what they build does not depend on the machine's load.
+    updated = rule_->updateEstimate(mpos, qpos, prior ? 0.0 : config_.time_budget_ms);
   }
-  if (!update_estimate) return Status::Ok();  // the caller solves once for a group (release())
-  if (graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) return Status::Ok();  // both fixed
-  // A loop accepted without a prior is committed in the host's loop-closure path, right after
-  // its verdict: bounded like a verification. Other loops committed without their accepting
-  // verify() (rover_replay's oracle protocol, overrides) are solved to convergence, so that
-  // what they build does not depend on the machine's load.
-  const TrialSolution s = graph_.solveWindow(mpos, qpos, nullptr, false, config_.max_iterations,
-                                             prior ? 0.0 : config_.time_budget_ms);
-  if (!s.summary.finite)  // the loop is in the graph (the host uses it); X keeps its old values
-    return Status::Warning("loop committed but the update of the estimate failed (" + s.summary.message + ")");
-  graph_.adopt(s);  // a solve stopped by the budget still moved X towards the loop
-  if (s.summary.timed_out)
+  // The loop is in the graph (the host uses it) whatever happened to X.
+  if (!updated.ok) return Status::Warning("loop committed but the update of the estimate failed (" + updated.message + ")");
+  if (updated.warning())
     return Status::Warning("loop committed; the update of the estimate stopped at time_budget_ms (" +
-                           s.summary.message + "): the next accepted loop's solve continues from there");
+                           updated.message + "): the next accepted loop's solve continues from there");
   return Status::Ok();
 }
 
@@ -262,9 +197,7 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  size_t n = 0;
-  for (const auto& g : groups_) n += g.size();
-  return n;
+  return held_.size();
 }
 
 namespace {
@@ -298,9 +231,9 @@ Eigen::Isometry3d Verifier::poseAt(size_t pos, bool vio) const {
   return T;
 }
 
-bool Verifier::consistent(const Held& a, const Held& b) const { return cycleTest(a, b) == 1; }
+bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const { return cycleTest(a, b) == 1; }
 
-int Verifier::cycleTest(const Held& a, const Held& b, bool from_vio) const {
+int Verifier::cycleTest(const HeldCandidate& a, const HeldCandidate& b, bool from_vio) const {
   // The cycle q_a -> m_a -> m_b -> q_b -> q_a through the two loops and the odometry between
   // the matches and between the queries must close: C = Za^-1 (Tma^-1 Tmb) Zb (Tqb^-1 Tqa) = I.
   // Each factor is a 4-DoF relative pose B with its covariance (from the older keyframe to the
@@ -321,7 +254,7 @@ int Verifier::cycleTest(const Held& a, const Held& b, bool from_vio) const {
     const size_t lo = std::min(from, to), hi = std::max(from, to);
     f->base = poseAt(lo, from_vio).inverse() * poseAt(hi, from_vio);
     f->inverted = from > to;
-    return graph_.chainCovariance(lo, hi, drift_scale_, &f->cov);
+    return graph_.chainCovariance(lo, hi, rule_->driftScale(), &f->cov);
   };
   const Eigen::Matrix4d L = graph_.loopCovariance();
   Factor f[4];
@@ -348,176 +281,88 @@ int Verifier::cycleTest(const Held& a, const Held& b, bool from_vio) const {
   return mahalanobis(r, S) <= chiSquareQuantile(config_.gate_probability, 4) ? 1 : 0;
 }
 
-void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, bool no_prior, bool rival) {
-  Held h;
-  h.candidate = c;
+void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind) {
+  HeldCandidate h = heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;
-  h.arrived = graph_.keyframeCount();
-  h.no_prior = no_prior;
-  h.rival = rival;
-  const size_t window = static_cast<size_t>(config_.confirm_window);
-  auto near = [window](size_t x, size_t y) { return (x > y ? x - y : y - x) <= window; };
-  bool joined = false;
-  for (auto& g : groups_) {
-    if (g.front().no_prior != no_prior || g.front().rival != rival || graph_.segmentAt(g.front().query_pos) != graph_.segmentAt(qpos) ||
-        graph_.segmentAt(g.front().match_pos) != graph_.segmentAt(mpos))
-      continue;
-    const size_t k = static_cast<size_t>(config_.confirm_count);
-    bool ok = true;
-    for (size_t i = g.size() > k ? g.size() - k : 0; ok && i < g.size(); ++i)
-      ok = near(g[i].query_pos, qpos) && consistent(g[i], h);
-    if (ok) {
-      g.push_back(h);
-      joined = true;
-      break;
-    }
-  }
-  if (!joined) groups_.push_back({h});
+  h.kind = kind;
+  held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
   settle();
 }
 
-void Verifier::settle() {
-  const size_t k = static_cast<size_t>(config_.confirm_count);
-  const size_t window = static_cast<size_t>(config_.confirm_window);
-  const size_t now = graph_.keyframeCount();
-  auto drop = [&](const std::vector<Held>& g, const std::string& why) {
-    for (const Held& h : g) {
-      LoopDecision d;
-      d.kind = LoopDecision::Kind::kDrop;
-      d.candidate = h.candidate;
-      d.verdict = Verdict::Reject(Reason::kUnconfirmed, h.candidate, why);
-      decisions_.push_back(d);
-    }
-  };
-  for (size_t i = 0; i < groups_.size();) {
-    std::vector<Held>& g = groups_[i];
-    if (g.front().rival) {
-      // Confirmed once revoke_group agree and they outnumber the loops they contradict (until
-      // then more rivals may join, or the window runs out).
-      std::vector<LoopCandidate> targets;
-      if (g.size() >= static_cast<size_t>(config_.revoke_group) && g.size() > (targets = rivalTargets(g)).size()) {
-        std::vector<Held> rivals;
-        rivals.swap(g);
-        groups_.erase(groups_.begin() + i);
-        settleRivals(rivals, targets);
-        i = 0;  // the graph may have changed
-        continue;
-      }
-    } else if (g.size() >= k) {
-      // Rivals: other held groups of the same query stretch that did not join this one.
-      bool blocked = false;
-      for (size_t j = 0; j < groups_.size(); ++j) {
-        if (j == i || groups_[j].front().rival) continue;  // rivals contend with accepted loops
-        const Held& other = groups_[j].back();
-        const size_t dq = other.query_pos > g.back().query_pos ? other.query_pos - g.back().query_pos
-                                                               : g.back().query_pos - other.query_pos;
-        if (dq <= window && 2 * groups_[j].size() >= g.size()) blocked = true;
-      }
-      if (!blocked) {
-        std::vector<Held> released;
-        released.swap(g);
-        groups_.erase(groups_.begin() + i);
-        release(released);
-        // Rivals too small to block are contradicted by the released group: dropped.
-        for (size_t j = 0; j < groups_.size();) {
-          const Held& other = groups_[j].back();
-          const size_t dq = other.query_pos > released.back().query_pos ? other.query_pos - released.back().query_pos
-                                                                        : released.back().query_pos - other.query_pos;
-          if (dq <= window && !groups_[j].front().rival) {
-            drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
-            groups_.erase(groups_.begin() + j);
-          } else {
-            ++j;
-          }
-        }
-        i = 0;  // the graph changed: look at the rest again
-        continue;
-      }
-    }
-    if (now > g.front().arrived + window) {
-      std::ostringstream s;
-      if (g.front().rival)
-        s << "a rival of accepted loops, not confirmed by revoke_group=" << config_.revoke_group
-          << " agreeing candidates within confirm_window=" << window << " keyframes: nothing revoked";
-      else
-        s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
-      drop(g, s.str());
-      groups_.erase(groups_.begin() + i);
-      continue;
-    }
-    ++i;
-  }
+void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict) {
+  LoopDecision d;
+  d.kind = kind;
+  d.candidate = c;
+  d.verdict = std::move(verdict);
+  decisions_.push_back(d);
 }
 
-void Verifier::release(const std::vector<Held>& group) {
+void Verifier::drop(const HeldGroup& group, const std::string& why) {
+  for (const HeldCandidate& h : group)
+    decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, why));
+}
+
+void Verifier::settle() {
+  HeldCandidates::Actions act;
+  act.rival_targets = [this](const HeldGroup& g) { return rivalTargets(g); };
+  act.settle_rivals = [this](const HeldGroup& g, const std::vector<LoopCandidate>& loops) { settleRivals(g, loops); };
+  act.release = [this](const HeldGroup& g) { release(g); };
+  act.drop = [this](const HeldGroup& g, const std::string& why) { drop(g, why); };
+  held_.settle(graph_.keyframeCount(), act);
+}
+
+void Verifier::release(const HeldGroup& group) {
   std::ostringstream why;
   why << "confirmed: " << group.size() << " held candidates agree with each other (loops "
       << group.front().candidate.query_index << "->" << group.front().candidate.match_index << " .. "
       << group.back().candidate.query_index << "->" << group.back().candidate.match_index << ")";
-  std::vector<const Held*> committed;
-  for (const Held& h : group) {
+  std::vector<const HeldCandidate*> committed;
+  for (const HeldCandidate& h : group) {
     // A candidate with a prior must still pass the test against the graph as it is now.
-    if (!h.no_prior && usesChi2() && graph_.connected(h.query_pos, h.match_pos)) {
-      Eigen::Matrix4d C;
-      Chi2Numbers n;
-      if (!graph_.relativeCovariance(h.match_pos, h.query_pos, drift_scale_, &C) ||
-          !chi2Test(config_, graph_.innovationVector(h.candidate, h.query_pos, h.match_pos),
-                    C + graph_.loopCovariance(), &n).passed) {
-        LoopDecision d;
-        d.kind = LoopDecision::Kind::kDrop;
-        d.candidate = h.candidate;
-        d.verdict = Verdict::Reject(Reason::kUnconfirmed, h.candidate,
-                                    "confirmed with its revisit but no longer consistent with the graph");
-        decisions_.push_back(d);
-        continue;
-      }
+    Decided unused;
+    if (h.kind != HoldKind::kNoPrior && graph_.connected(h.query_pos, h.match_pos) &&
+        !rule_->recheck(h.candidate, h.query_pos, h.match_pos, &unused)) {
+      decide(LoopDecision::Kind::kDrop, h.candidate,
+             Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed with its revisit but no longer consistent with the graph"));
+      continue;
     }
     pending_.valid = false;
     const Status s = commitLocked(h.candidate, false);
-    LoopDecision d;
-    d.candidate = h.candidate;
     if (!s.ok) {
-      d.kind = LoopDecision::Kind::kDrop;
-      d.verdict = Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed but not committed: " + s.message);
+      decide(LoopDecision::Kind::kDrop, h.candidate,
+             Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed but not committed: " + s.message));
     } else {
-      d.kind = LoopDecision::Kind::kRelease;
-      d.verdict = Verdict::Accept(h.candidate, why.str());
+      decide(LoopDecision::Kind::kRelease, h.candidate, Verdict::Accept(h.candidate, why.str()));
       committed.push_back(&h);
     }
-    decisions_.push_back(d);
   }
   if (committed.empty()) return;
-  // One update of the estimate for the whole group.
-  if (usesChi2()) {
-    graph_.updateEstimate(committed.back()->query_pos, drift_scale_);
-  } else {
-    // In the host's loop-closure path like a commit: bounded when the group had no prior.
-    const Held& last = *committed.back();
-    const TrialSolution sol = graph_.solveWindow(committed.front()->match_pos, last.query_pos, nullptr, false,
-                                                 config_.max_iterations,
-                                                 committed.front()->no_prior ? config_.time_budget_ms : 0.0);
-    if (sol.summary.finite) graph_.adopt(sol);
-  }
+  // One update of the estimate for the whole group; in the host's loop-closure path like a
+  // commit: bounded when the group had no prior.
+  rule_->updateEstimate(committed.front()->match_pos, committed.back()->query_pos,
+                        committed.front()->kind == HoldKind::kNoPrior ? config_.time_budget_ms : 0.0);
 }
 
 // ---- revocation (revoke_group) ----------------------------------------------------------------
 
-Verifier::Held Verifier::heldFor(const LoopCandidate& c) const {
-  Held h;
+HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
+  HeldCandidate h;
   h.candidate = c;
   graph_.find(c.query_index, &h.query_pos);
   graph_.find(c.match_index, &h.match_pos);
+  h.query_segment = graph_.segmentAt(h.query_pos);
+  h.match_segment = graph_.segmentAt(h.match_pos);
   h.arrived = graph_.keyframeCount();
   return h;
 }
 
-std::vector<LoopCandidate> Verifier::contradicted(const Held& h) const {
+std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h) const {
   const size_t window = static_cast<size_t>(config_.confirm_window);
   const size_t first = h.query_pos > window ? h.query_pos - window : 0;
   std::vector<LoopCandidate> out;
   for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
-    const Held a = heldFor(l);
+    const HeldCandidate a = heldFor(l);
     // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
     if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) && cycleTest(a, h, true) == 0) out.push_back(l);
   }
@@ -529,7 +374,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   if (reason != Reason::kInnovationAboveBound && reason != Reason::kScoreAboveThreshold &&
       reason != Reason::kInconsistentWithDrift)
     return false;
-  Held h;
+  HeldCandidate h;
   h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
@@ -542,13 +387,13 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   s << (against.size() > 3 ? ", ..." : "") << "): held as a rival until revoke_group=" << config_.revoke_group
     << " agree";
   *detail = s.str();
-  hold(c, qpos, mpos, false, true);
+  hold(c, qpos, mpos, HoldKind::kRival);
   return true;
 }
 
-std::vector<LoopCandidate> Verifier::rivalTargets(const std::vector<Held>& group) const {
+std::vector<LoopCandidate> Verifier::rivalTargets(const HeldGroup& group) const {
   std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
-  for (const Held& h : group)
+  for (const HeldCandidate& h : group)
     for (const LoopCandidate& l : contradicted(h)) {
       auto& v = votes[{l.query_index, l.match_index}];
       v.first = l;
@@ -560,20 +405,14 @@ std::vector<LoopCandidate> Verifier::rivalTargets(const std::vector<Held>& group
   return loops;
 }
 
-void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<LoopCandidate>& loops) {
+void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops) {
   pending_.valid = false;  // the graph changes below
-  auto decide = [&](LoopDecision::Kind kind, const LoopCandidate& c, Verdict v) {
-    LoopDecision d;
-    d.kind = kind;
-    d.candidate = c;
-    d.verdict = std::move(v);
-    decisions_.push_back(d);
+  auto dropAll = [&](const std::vector<const HeldCandidate*>& hs, const std::string& why) {
+    for (const HeldCandidate* h : hs)
+      decide(LoopDecision::Kind::kDrop, h->candidate, Verdict::Reject(Reason::kUnconfirmed, h->candidate, why));
   };
-  auto dropAll = [&](const std::vector<const Held*>& hs, const std::string& why) {
-    for (const Held* h : hs) decide(LoopDecision::Kind::kDrop, h->candidate, Verdict::Reject(Reason::kUnconfirmed, h->candidate, why));
-  };
-  std::vector<const Held*> all;
-  for (const Held& h : group) all.push_back(&h);
+  std::vector<const HeldCandidate*> all;
+  for (const HeldCandidate& h : group) all.push_back(&h);
 
   std::ostringstream what;
   what << group.size() << " rivals (loops " << group.front().candidate.query_index << "->"
@@ -587,7 +426,7 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
   // The graph without those loops, and the rivals decided again against it.
   const std::vector<KeyframeState> saved = graph_.estimates();
   size_t first = group.front().match_pos, newest = group.front().query_pos;
-  for (const Held& h : group) {
+  for (const HeldCandidate& h : group) {
     first = std::min(first, h.match_pos);
     newest = std::max(newest, h.query_pos);
   }
@@ -596,15 +435,10 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
     size_t m = 0;
     if (graph_.find(l.match_index, &m)) first = std::min(first, m);
   }
-  if (usesChi2()) {
-    graph_.updateEstimate(newest, drift_scale_);
-  } else {
-    const TrialSolution back = graph_.solveWindow(first, newest, nullptr, false, config_.max_iterations, 0.0);
-    if (back.summary.finite) graph_.adopt(back);
-  }
-  std::vector<const Held*> passed, failed;
+  rule_->updateEstimate(first, newest, 0.0);
+  std::vector<const HeldCandidate*> passed, failed;
   auto putBack = [&](const std::string& why) {
-    for (const Held* h : passed) graph_.removeLoop(h->candidate.query_index, h->candidate.match_index);
+    for (const HeldCandidate* h : passed) graph_.removeLoop(h->candidate.query_index, h->candidate.match_index);
     for (const LoopCandidate& l : loops) graph_.addLoop(l);
     graph_.restoreEstimates(saved);
     dropAll(all, why);
@@ -621,7 +455,7 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
     size_t q = 0, m = 0;
     Eigen::Matrix4d C;
     if (!graph_.find(c.query_index, &q) || !graph_.find(c.match_index, &m) ||
-        !graph_.relativeCovariance(m, q, drift_scale_, &C))
+        !graph_.relativeCovariance(m, q, rule_->driftScale(), &C))
       return std::numeric_limits<double>::infinity();
     return mahalanobis(graph_.innovationVector(c, q, m), C + graph_.loopCovariance());
   };
@@ -631,7 +465,7 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
   };
   std::vector<double> fit_loops, fit_rivals;
   for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
-  for (const Held& h : group) fit_rivals.push_back(misfit(h.candidate));
+  for (const HeldCandidate& h : group) fit_rivals.push_back(misfit(h.candidate));
   const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
   const double gate = chiSquareQuantile(config_.gate_probability, 4);
   if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.lookalike_margin < misfit_loops)) {
@@ -645,23 +479,10 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
     return;
   }
 
-  for (const Held& h : group) {
-    bool ok = false;
-    if (usesChi2()) {
-      Eigen::Matrix4d C;
-      Chi2Numbers n;
-      ok = graph_.relativeCovariance(h.match_pos, h.query_pos, drift_scale_, &C) &&
-           chi2Test(config_, graph_.innovationVector(h.candidate, h.query_pos, h.match_pos), C + graph_.loopCovariance(), &n)
-               .passed &&
-           graph_.addLoop(h.candidate).ok;
-      if (ok) graph_.updateEstimate(h.query_pos, drift_scale_);
-    } else {
-      Verdict measured;
-      TrialSolution trial;
-      ok = metricDecision(h.candidate, h.query_pos, h.match_pos, -1, Clock::now(), &measured, &trial).passed &&
-           graph_.addLoop(h.candidate).ok;
-      if (ok) graph_.adopt(trial);
-    }
+  for (const HeldCandidate& h : group) {
+    Decided decided;
+    const bool ok = rule_->recheck(h.candidate, h.query_pos, h.match_pos, &decided) && graph_.addLoop(h.candidate).ok;
+    if (ok) rule_->adoptDecided(decided, h.query_pos, true);
     (ok ? passed : failed).push_back(&h);
   }
 
@@ -677,7 +498,7 @@ void Verifier::settleRivals(const std::vector<Held>& group, const std::vector<Lo
     released << what.str() << ": " << loops.size() << " accepted loop(s) they contradicted revoked ("
              << loops.front().query_index << "->" << loops.front().match_index << (loops.size() > 1 ? ", ..." : "")
              << ")";
-    for (const Held* h : passed) decide(LoopDecision::Kind::kRelease, h->candidate, Verdict::Accept(h->candidate, released.str()));
+    for (const HeldCandidate* h : passed) decide(LoopDecision::Kind::kRelease, h->candidate, Verdict::Accept(h->candidate, released.str()));
     dropAll(failed, what.str() + " and revoked the loops they contradict, but this one does not pass against the graph without them");
     return;
   }
@@ -720,41 +541,7 @@ std::vector<TrajectoryPoint> Verifier::trajectory() const {
 
 double Verifier::driftScale() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return drift_scale_;
-}
-
-bool Verifier::usesChi2() const {
-  return config_.decision == Decision::kChi2;
-}
-
-void Verifier::recalibrate() {
-  // Robust maximum likelihood of one variance scale s of the drift model: each accepted loop's
-  // innovation nu ~ N(0, s C + L) (C: its chain covariance at scale 1, L: the loop's), Huber
-  // on sqrt(d2) (an accepted look-alike cannot drag s far), over a log grid of s.
-  const size_t kMinLoops = 5, kWindow = 200;
-  if (calibration_.size() < kMinLoops) return;
-  const size_t first = calibration_.size() > kWindow ? calibration_.size() - kWindow : 0;
-  const Eigen::Matrix4d L = graph_.loopCovariance();
-  double best = drift_scale_, best_nll = std::numeric_limits<double>::infinity();
-  for (int k = 0; k <= 80; ++k) {
-    const double s = std::exp(std::log(0.01) + k * (std::log(100.0) - std::log(0.01)) / 80.0);
-    double nll = 0.0;
-    for (size_t i = first; i < calibration_.size(); ++i) {
-      const Eigen::Matrix4d S = s * calibration_[i].chain_covariance + L;
-      const Eigen::LLT<Eigen::Matrix4d> llt(S);
-      if (llt.info() != Eigen::Success) continue;
-      const double d2 = calibration_[i].innovation.dot(llt.solve(calibration_[i].innovation));
-      const double r = std::sqrt(std::max(0.0, d2));
-      const double rho = r < 3.0 ? d2 : 6.0 * r - 9.0;
-      const Eigen::Matrix4d Lc = llt.matrixL();
-      nll += 0.5 * rho + Lc.diagonal().array().log().sum();
-    }
-    if (nll < best_nll) {
-      best_nll = nll;
-      best = s;
-    }
-  }
-  drift_scale_ = best;
+  return rule_->driftScale();
 }
 
 BatchSolveResult Verifier::solveLikeLoopFusion(int max_iterations) const {

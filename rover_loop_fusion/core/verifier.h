@@ -38,12 +38,15 @@
 // Verdict with reason kInvalidInput.
 #pragma once
 
+#include "rover_loop_fusion/core/decision_rule.h"
+#include "rover_loop_fusion/core/held_candidates.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/types.h"
 
 #include <Eigen/Geometry>
 
 #include <chrono>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <utility>
@@ -51,8 +54,6 @@
 
 namespace rover_loop_fusion {
 namespace core {
-
-struct Check;  // core/decision.h
 
 class Verifier {
  public:
@@ -118,69 +119,50 @@ class Verifier {
   std::pair<Verdict, Verdict> compareTrials(const LoopCandidate& candidate, int condense_min_window);
 
  private:
-  /// A held candidate.
-  struct Held {
-    LoopCandidate candidate;
-    size_t query_pos = 0, match_pos = 0;
-    size_t arrived = 0;    ///< keyframeCount() when it was held
-    bool no_prior = false; ///< held for confirm_without_prior (else for hold_sigma)
-    bool rival = false;    ///< held for contradicting accepted loops (revoke_group)
-  };
-  bool usesChi2() const;
-  /// decision metric from the innovation gate on: fills the numbers and the trial (trials over
-  /// more than `condense_min_window` keyframes condensed; -1: the config's).
-  Check metricDecision(const LoopCandidate& c, size_t query_pos, size_t match_pos, int condense_min_window,
-                       std::chrono::steady_clock::time_point t0, Verdict* measured, TrialSolution* trial);
-  void recalibrate();
+  /// Holds a candidate (a deferred verdict) and settles what is due.
+  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind);
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
-  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, bool no_prior, bool rival = false);
   /// revoke_group: holds a candidate rejected for `reason` as a rival if it contradicts an
   /// accepted loop of its stretch (appends why to *detail); false if it stays rejected.
   bool holdAsRival(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
   /// The accepted loops of the stretch of `h` (queries within confirm_window) that the cycle
   /// test finds inconsistent with it.
-  std::vector<LoopCandidate> contradicted(const Held& h) const;
+  std::vector<LoopCandidate> contradicted(const HeldCandidate& h) const;
   /// The accepted loops a group of rivals contradicts: those of its stretch that most of its
   /// members are inconsistent with.
-  std::vector<LoopCandidate> rivalTargets(const std::vector<Held>& group) const;
+  std::vector<LoopCandidate> rivalTargets(const HeldGroup& group) const;
   /// A confirmed group of rivals that outnumbers the `loops` it contradicts: revoke them and
   /// release the rivals that pass against the graph without them, or put everything back and
   /// drop the group.
-  void settleRivals(const std::vector<Held>& group, const std::vector<LoopCandidate>& loops);
+  void settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops);
   /// The cycle test of two loops (see consistent()): 1 consistent, 0 not, -1 unknown (the
   /// odometry between them is not one chain). The odometry factors are the relative poses of X,
   /// or of the VIO poses (`from_vio`: what the chain covariance describes, and what false
   /// loops already accepted have not bent).
-  int cycleTest(const Held& a, const Held& b, bool from_vio = false) const;
-  Held heldFor(const LoopCandidate& c) const;
+  int cycleTest(const HeldCandidate& a, const HeldCandidate& b, bool from_vio = false) const;
+  HeldCandidate heldFor(const LoopCandidate& c) const;
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
-  void release(const std::vector<Held>& group);
-  bool consistent(const Held& a, const Held& b) const;
+  void release(const HeldGroup& group);
+  void drop(const HeldGroup& group, const std::string& why);
+  bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
   /// X (or the VIO pose) of the keyframe at `position`.
   Eigen::Isometry3d poseAt(size_t position, bool vio = false) const;
-  /// The X* of the last verify() that accepted, for commit() to keep.
+  void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
+  /// What the last verify() that accepted worked out, for commit() to keep.
   struct Pending {
     bool valid = false;
     LoopCandidate candidate;
-    uint64_t revision = 0;  ///< the graph's revision it was solved on
-    TrialSolution solution;
-    Eigen::Vector4d innovation = Eigen::Vector4d::Zero();  ///< chi2: for the calibration
-    Eigen::Matrix4d chain_covariance = Eigen::Matrix4d::Zero();  ///< chi2, at variance scale 1
-  };
-  /// chi2 + calibrate_drift: what each accepted loop said about the drift.
-  struct CalibrationSample {
-    Eigen::Vector4d innovation;
-    Eigen::Matrix4d chain_covariance;
+    uint64_t revision = 0;  ///< the graph's revision it was decided on
+    Decided decided;
   };
   std::string config_error_;  // before config_: the constructor validates first
   VerifierConfig config_;
   mutable std::mutex mutex_;
   KeyframeGraph graph_;
+  std::unique_ptr<DecisionRule> rule_;
   Pending pending_;
-  double drift_scale_ = 1.0;
-  std::vector<CalibrationSample> calibration_;
-  std::vector<std::vector<Held>> groups_;  ///< held candidates, by revisit
+  HeldCandidates held_;
   std::vector<LoopDecision> decisions_;    ///< not yet taken
   std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
 };

@@ -1,0 +1,99 @@
+#include "rover_loop_fusion/core/held_candidates.h"
+
+#include <sstream>
+
+namespace rover_loop_fusion {
+namespace core {
+
+namespace {
+
+size_t distance(size_t x, size_t y) { return x > y ? x - y : y - x; }
+
+}  // namespace
+
+void HeldCandidates::add(const HeldCandidate& h,
+                         const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent) {
+  const size_t window = static_cast<size_t>(config_.confirm_window);
+  const size_t k = static_cast<size_t>(config_.confirm_count);
+  for (HeldGroup& g : groups_) {
+    const HeldCandidate& f = g.front();
+    if (f.kind != h.kind || f.query_segment != h.query_segment || f.match_segment != h.match_segment) continue;
+    bool ok = true;
+    for (size_t i = g.size() > k ? g.size() - k : 0; ok && i < g.size(); ++i)
+      ok = distance(g[i].query_pos, h.query_pos) <= window && consistent(g[i], h);
+    if (ok) {
+      g.push_back(h);
+      return;
+    }
+  }
+  groups_.push_back({h});
+}
+
+size_t HeldCandidates::size() const {
+  size_t n = 0;
+  for (const HeldGroup& g : groups_) n += g.size();
+  return n;
+}
+
+void HeldCandidates::settle(size_t now, const Actions& act) {
+  const size_t k = static_cast<size_t>(config_.confirm_count);
+  const size_t window = static_cast<size_t>(config_.confirm_window);
+  for (size_t i = 0; i < groups_.size();) {
+    HeldGroup& g = groups_[i];
+    if (g.front().kind == HoldKind::kRival) {
+      // Confirmed once revoke_group agree and they outnumber the loops they contradict (until
+      // then more rivals may join, or the window runs out).
+      std::vector<LoopCandidate> targets;
+      if (g.size() >= static_cast<size_t>(config_.revoke_group) && g.size() > (targets = act.rival_targets(g)).size()) {
+        HeldGroup rivals;
+        rivals.swap(g);
+        groups_.erase(groups_.begin() + i);
+        act.settle_rivals(rivals, targets);
+        i = 0;  // the graph may have changed
+        continue;
+      }
+    } else if (g.size() >= k) {
+      // Rivals: other held groups of the same query stretch that did not join this one.
+      bool blocked = false;
+      for (size_t j = 0; j < groups_.size(); ++j) {
+        if (j == i || groups_[j].front().kind == HoldKind::kRival) continue;  // rivals contend with accepted loops
+        if (distance(groups_[j].back().query_pos, g.back().query_pos) <= window && 2 * groups_[j].size() >= g.size())
+          blocked = true;
+      }
+      if (!blocked) {
+        HeldGroup released;
+        released.swap(g);
+        groups_.erase(groups_.begin() + i);
+        act.release(released);
+        // Rivals too small to block are contradicted by the released group: dropped.
+        for (size_t j = 0; j < groups_.size();) {
+          if (distance(groups_[j].back().query_pos, released.back().query_pos) <= window &&
+              groups_[j].front().kind != HoldKind::kRival) {
+            act.drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
+            groups_.erase(groups_.begin() + j);
+          } else {
+            ++j;
+          }
+        }
+        i = 0;  // the graph changed: look at the rest again
+        continue;
+      }
+    }
+    if (now > g.front().arrived + window) {
+      std::ostringstream s;
+      if (g.front().kind == HoldKind::kRival)
+        s << "a rival of accepted loops, not confirmed by revoke_group=" << config_.revoke_group
+          << " agreeing candidates within confirm_window=" << window << " keyframes: nothing revoked";
+      else
+        s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
+      const HeldGroup expired = g;
+      groups_.erase(groups_.begin() + i);
+      act.drop(expired, s.str());
+      continue;
+    }
+    ++i;
+  }
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion

@@ -1,0 +1,68 @@
+// Candidates the verifier holds (deferred verdicts) until a later decision, by kind and revisit:
+//   kNoPrior    between sequences nothing ties together yet (confirm_without_prior): released
+//               once confirm_count of one stretch agree with each other;
+//   kWeakPrior  passed the chi2 tests on a prior too weak to trust alone (hold_sigma): the same;
+//   kRival      rejected for contradicting an accepted loop of its stretch (revoke_group): a
+//               group that outnumbers those loops is decided against the graph without them.
+// This unit owns the bookkeeping: which held candidates form a group (same kind, same segments,
+// queries within confirm_window, every pair of the last confirm_count consistent), which group
+// is due (confirmed, expired, blocked by a rival group of its stretch) and in which order. What
+// a release, a drop or a revocation does to the graph is the verifier's (the Actions).
+#pragma once
+
+#include "rover_loop_fusion/core/types.h"
+
+#include <cstddef>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace rover_loop_fusion {
+namespace core {
+
+enum class HoldKind { kNoPrior, kWeakPrior, kRival };
+
+struct HeldCandidate {
+  LoopCandidate candidate;
+  size_t query_pos = 0, match_pos = 0;
+  int query_segment = 0, match_segment = 0;
+  size_t arrived = 0;  ///< keyframes in the graph when it was held
+  HoldKind kind = HoldKind::kNoPrior;
+};
+using HeldGroup = std::vector<HeldCandidate>;
+
+class HeldCandidates {
+ public:
+  /// Reads confirm_count, confirm_window and revoke_group.
+  explicit HeldCandidates(const VerifierConfig& config) : config_(config) {}
+
+  /// Holds `h`: it joins the first group of its kind and segments whose last confirm_count
+  /// members lie within confirm_window keyframes of it and are `consistent` with it, or starts
+  /// a group of its own.
+  void add(const HeldCandidate& h, const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent);
+  size_t size() const;
+  bool empty() const { return groups_.empty(); }
+
+  /// What settle() asks the verifier to do with a group it has taken out.
+  struct Actions {
+    /// The accepted loops a group of rivals contradicts.
+    std::function<std::vector<LoopCandidate>(const HeldGroup&)> rival_targets;
+    /// A confirmed group of rivals against the loops it contradicts (may change the graph).
+    std::function<void(const HeldGroup&, const std::vector<LoopCandidate>&)> settle_rivals;
+    /// A confirmed group (may change the graph).
+    std::function<void(const HeldGroup&)> release;
+    /// A group given up, with why.
+    std::function<void(const HeldGroup&, const std::string&)> drop;
+  };
+  /// Acts on every group that is due at `now` keyframes: confirmed groups (released, or rivals
+  /// settled), rival groups too small to block a released one (dropped), expired groups
+  /// (dropped); after an action that may change the graph it looks at the rest again.
+  void settle(size_t now, const Actions& act);
+
+ private:
+  const VerifierConfig& config_;
+  std::vector<HeldGroup> groups_;  ///< by revisit, oldest first
+};
+
+}  // namespace core
+}  // namespace rover_loop_fusion
