@@ -1,6 +1,7 @@
 // INTERNAL: not part of the core's API (include core/pose_graph.h). The state behind
 // KeyframeGraph (KeyframeGraph::Impl) and the helpers its implementation files share:
 //   core/pose_graph.cpp        the graph: keyframe lookup, poses and states, edges, loops, X
+//   core/keyframe_intake.cpp   addKeyframe: plausibility, jump recovery, segments (union-find)
 #pragma once
 
 #include "rover_loop_fusion/core/pose_graph.h"
