@@ -2,6 +2,7 @@
 // KeyframeGraph (KeyframeGraph::Impl) and the helpers its implementation files share:
 //   core/pose_graph.cpp        the graph: keyframe lookup, poses and states, edges, loops, X
 //   core/keyframe_intake.cpp   addKeyframe: plausibility, jump recovery, segments (union-find)
+//   core/trial_solve.cpp       Ceres trials over a window (trial_budget.h: deadline, cost model)
 #pragma once
 
 #include "rover_loop_fusion/core/pose_graph.h"
