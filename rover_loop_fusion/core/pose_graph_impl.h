@@ -3,6 +3,7 @@
 //   core/pose_graph.cpp        the graph: keyframe lookup, poses and states, edges, loops, X
 //   core/keyframe_intake.cpp   addKeyframe: plausibility, jump recovery, segments (union-find)
 //   core/trial_solve.cpp       Ceres trials over a window (trial_budget.h: deadline, cost model)
+//   core/condensed_trial.cpp   the condensed graph (core/condensed.h) of a component, and trials on it
 #pragma once
 
 #include "rover_loop_fusion/core/pose_graph.h"
