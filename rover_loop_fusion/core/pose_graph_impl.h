@@ -4,6 +4,7 @@
 //   core/keyframe_intake.cpp   addKeyframe: plausibility, jump recovery, segments (union-find)
 //   core/trial_solve.cpp       Ceres trials over a window (trial_budget.h: deadline, cost model)
 //   core/condensed_trial.cpp   the condensed graph (core/condensed.h) of a component, and trials on it
+//   core/graph_uncertainty.cpp drift moments and covariances (core/drift.h), the chi2 estimate
 #pragma once
 
 #include "rover_loop_fusion/core/pose_graph.h"
