@@ -1,3 +1,10 @@
+// The pose graph itself (core/pose_graph.h): keyframe lookup, keyframe states and poses
+// (4-DoF: yaw + t; 6-DoF: q + t) and rigid corrections between them, the Ceres cost of an
+// edge, loops (checks, loop_fusion's first-loop anchoring of a sequence, removal), the
+// estimate X, the innovation of a candidate and odometry path lengths. The rest of
+// KeyframeGraph, by concern (the state they share: core/pose_graph_impl.h):
+// keyframe_intake.cpp, trial_solve.cpp, condensed_trial.cpp, graph_uncertainty.cpp,
+// batch_solve.cpp.
 #include "rover_loop_fusion/core/pose_graph.h"
 
 #include "rover_loop_fusion/core/pose_graph_impl.h"
@@ -5,15 +12,14 @@
 #include "rover_loop_fusion/core/geometry.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <deque>
+#include <functional>
 #include <limits>
-#include <map>
 #include <queue>
 #include <sstream>
-#include <tuple>
+#include <string>
 #include <utility>
+#include <vector>
 
 namespace rover_loop_fusion {
 namespace core {
@@ -323,32 +329,6 @@ double KeyframeGraph::innovation(const LoopCandidate& c, size_t qpos, size_t mpo
 }
 
 double KeyframeGraph::pathLength(size_t from, size_t to) const { return impl_->pathLength(from, to); }
-
-BatchSolveResult KeyframeGraph::solveLikeLoopFusion(int max_iterations) const {
-  Impl& m = *impl_;
-  BatchSolveResult r;
-  r.poses.resize(m.kfs.size());
-  for (size_t p = 0; p < m.kfs.size(); ++p) r.poses[p] = m.kfs[p].vio;
-  if (m.loops.empty()) {
-    r.ok = true;
-    r.message = "no loops: the VIO trajectory";
-    return r;
-  }
-  size_t first = m.kfs.size();
-  for (const Impl::Edge& e : m.loops) first = std::min(first, e.from);
-  Impl::Trial tr;
-  m.buildTrial(tr, first, kEverySegment, true, nullptr, nullptr);
-  const SolveSummary o = m.solve(tr, max_iterations, 0.0, Clock::now());
-  r.iterations = o.iterations;
-  r.solve_ms = o.solve_ms;
-  r.free_keyframes = static_cast<int>(tr.positions.size());
-  r.message = o.message;
-  r.ok = o.finite;
-  if (!r.ok) return r;
-  for (size_t i = 0; i < tr.positions.size(); ++i)
-    r.poses[tr.positions[i]] = m.poseFromState(tr.states[i], m.kfs[tr.positions[i]]);
-  return r;
-}
 
 int KeyframeGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
 

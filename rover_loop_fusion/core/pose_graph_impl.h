@@ -5,6 +5,7 @@
 //   core/trial_solve.cpp       Ceres trials over a window (trial_budget.h: deadline, cost model)
 //   core/condensed_trial.cpp   the condensed graph (core/condensed.h) of a component, and trials on it
 //   core/graph_uncertainty.cpp drift moments and covariances (core/drift.h), the chi2 estimate
+//   core/batch_solve.cpp       loop_fusion's own batch solve
 #pragma once
 
 #include "rover_loop_fusion/core/pose_graph.h"
@@ -136,14 +137,8 @@ struct KeyframeGraph::Impl {
 
   bool fourDof() const { return cfg.mode == Mode::kFourDof; }
 
-  // ---- lookup -------------------------------------------------------------------------
+  // ---- the graph (pose_graph.cpp): lookup, poses and states, edges, loops ------------------
   bool find(int64_t index, size_t* pos) const;
-  int root(int segment);
-  /// Why keyframe b cannot follow keyframe a of its sequence (too far, stamp not after a's or
-  /// too long after it); empty if it can.
-  std::string implausibleStep(const Keyframe& a, const Keyframe& b) const;
-
-  // ---- poses and states ---------------------------------------------------------------
   KeyframeState stateFromPose(const Pose& p) const;
   Pose poseFromState(const KeyframeState& s, const Keyframe& kf) const;
   Eigen::Matrix3d rotationOf(const KeyframeState& s, const Keyframe& kf) const;
@@ -158,7 +153,6 @@ struct KeyframeGraph::Impl {
   /// A 6-DoF state's yaw is always that of its q (the chi2 decision works on x, y, z, yaw).
   void setYaw(KeyframeState& s, double yaw) const;
 
-  // ---- edges --------------------------------------------------------------------------
   /// The Ceres cost of an edge with the given measurement, weighted by its information.
   std::shared_ptr<ceres::CostFunction> edgeCost(const Eigen::Vector3d& t_ij, double yaw_ij,
                                                 const Eigen::Quaterniond& q_ij, const Keyframe& from,
@@ -166,10 +160,23 @@ struct KeyframeGraph::Impl {
   void setOdometryCost(Edge& e) const;
   void setLoopCost(Edge& e) const;
 
-  // ---- validation ---------------------------------------------------------------------
   std::string checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const;
+  double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
+  /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
+  /// chain distances), so the cost grows with the number of loops, not of keyframes.
+  double pathLength(size_t from, size_t to) const;
+  /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
+  void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos);
 
-  // ---- trial problem ------------------------------------------------------------------
+  // ---- keyframe intake and segments (keyframe_intake.cpp) ----------------------------------
+  /// Why keyframe b cannot follow keyframe a of its sequence (too far, stamp not after a's or
+  /// too long after it); empty if it can.
+  std::string implausibleStep(const Keyframe& a, const Keyframe& b) const;
+  int root(int segment);
+  /// The segment root of the keyframe at `pos` (root() without path compression).
+  int componentOf(size_t pos) const;
+
+  // ---- trials (trial_solve.cpp; the deadline and cost model: trial_budget.h) ---------------
   void addBlocks(Trial& tr, KeyframeState& s, bool constant);
   double* rotBlock(KeyframeState& s) const { return fourDof() ? &s.yaw : s.q; }
   /// State of position p inside the trial, or a constant block holding x[p] if p is outside.
@@ -187,20 +194,10 @@ struct KeyframeGraph::Impl {
                      DeadlineCallback* callback = nullptr);
   /// Learns setup_cost / iteration_cost from a budgeted trial.
   void learnCost(size_t window, double total_ms, const DeadlineCallback& callback);
-  double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
-  /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
-  /// chain distances), so the cost grows with the number of loops, not of keyframes.
-  double pathLength(size_t from, size_t to) const;
   size_t windowStart(size_t match_pos) const;
   void adopt(const std::vector<size_t>& positions, const std::vector<KeyframeState>& states);
-  /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
-  void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos);
 
-  // ---- uncertainty (core/drift.h, core/condensed.h) -----------------------------------
-  void appendMoments(size_t pos);
-  /// After loop_fusion's shift of a sequence: the moments of its segments from the new poses.
-  void rebuildMoments(int sequence);
-  Eigen::Matrix4d loopCovariance() const;
+  // ---- the condensed graph and condensed trials (condensed_trial.cpp; core/condensed.h) ----
   /// The accepted loops of a component as condensed-graph edges: loops of one revisit within
   /// kMergeKeyframes (query and match) merged into one edge with the information of all;
   /// beyond the cap, the newest half kept and the older thinned evenly.
@@ -248,10 +245,15 @@ struct KeyframeGraph::Impl {
   std::vector<std::pair<size_t, size_t>> windowRanges(const TrialSolution& s, bool skip_fixed_map) const;
   /// Every `stride`-th keyframe of windowRanges(), increasing.
   std::vector<size_t> windowPositions(const TrialSolution& s, size_t stride, bool skip_fixed_map) const;
-  int componentOf(size_t pos) const;
   /// Carries new anchor states to every keyframe of the component: chains between anchors by
   /// the chain model's conditional mean, the ends rigidly with their anchor.
   void spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg);
+
+  // ---- uncertainty (graph_uncertainty.cpp; core/drift.h) -----------------------------------
+  void appendMoments(size_t pos);
+  /// After loop_fusion's shift of a sequence: the moments of its segments from the new poses.
+  void rebuildMoments(int sequence);
+  Eigen::Matrix4d loopCovariance() const;
 };
 
 }  // namespace core
