@@ -1,0 +1,170 @@
+// Keyframe intake of the pose graph (KeyframeGraph::addKeyframe): the checks of a new keyframe
+// (index, sequence, finite pose, unit quaternion), the plausibility of its step from the
+// previous keyframe of its sequence (max_keyframe_jump, max_stamp_jump) and the recovery from
+// a jump (jump_confirmations: a relocation starts a new segment, or a new clock); then its
+// estimate, drift moments and odometry edges. Also the segments' union-find (root, componentOf):
+// odometry joins keyframes of one segment, loops join segments.
+#include "rover_loop_fusion/core/pose_graph_impl.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <string>
+
+namespace rover_loop_fusion {
+namespace core {
+
+std::string KeyframeGraph::Impl::implausibleStep(const Keyframe& a, const Keyframe& b) const {
+  std::ostringstream s;
+  s.precision(17);
+  const double jump = (b.vio.t - a.vio.t).norm();
+  if (!(jump <= cfg.max_keyframe_jump)) {
+    s.precision(6);
+    s << "position jumps " << jump << " m from keyframe " << a.index << " (max_keyframe_jump "
+      << cfg.max_keyframe_jump << " m)";
+    s.precision(17);
+  }
+  const double dt = b.stamp - a.stamp;
+  if (!(dt > 0.0) || !(dt <= cfg.max_stamp_jump)) {
+    if (!s.str().empty()) s << "; ";
+    if (!(dt > 0.0))
+      s << "out of order: stamp " << b.stamp << " not after the previous keyframe's " << a.stamp << " in sequence " << a.sequence;
+    else
+      s << "stamp " << b.stamp << " is " << dt << " s after keyframe " << a.index << "'s (max_stamp_jump "
+        << cfg.max_stamp_jump << " s)";
+  }
+  return s.str();
+}
+
+Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
+                              const Eigen::Quaterniond& q) {
+  Impl& m = *impl_;
+  const std::string who = "keyframe " + describeIndex(index) + ": ";
+  if (index < 0) return Status::Error(who + "negative index");
+  if (sequence < 0) return Status::Error(who + "negative sequence");
+  if (!t.allFinite()) return Status::Error(who + "position is not finite");
+  if (!(t.cwiseAbs().maxCoeff() <= kMaxCoordinate)) {
+    std::ostringstream s;
+    s << who << "position (" << t.x() << ", " << t.y() << ", " << t.z() << ") beyond " << kMaxCoordinate
+      << " m from the origin: not a VIO pose";
+    return Status::Error(s.str());
+  }
+  if (!std::isfinite(stamp)) return Status::Error(who + "stamp is not finite");
+  if (!unitQuaternion(q, config_.quaternion_tolerance)) return Status::Error(who + "orientation is not a unit quaternion");
+  const Impl::Keyframe* prev = nullptr;  // the previous keyframe of this sequence
+  if (!m.kfs.empty()) {
+    const Impl::Keyframe& last = m.kfs.back();
+    if (index == last.index) return Status::Error(who + "duplicate index");
+    if (index < last.index) return Status::Error(who + "index older than the newest keyframe " + describeIndex(last.index));
+    if (sequence < last.sequence)
+      return Status::Error(who + "sequence " + std::to_string(sequence) + " after sequence " + std::to_string(last.sequence));
+    if (sequence == last.sequence) prev = &last;
+  }
+
+  Impl::Keyframe kf;
+  kf.index = index;
+  kf.stamp = stamp;
+  kf.sequence = sequence;
+  kf.segment = prev ? prev->segment : sequence;
+  kf.vio = Pose(t, q.normalized());
+  if (config_.anchor_incoming_keyframes) {
+    auto shift = m.seq_shift.find(sequence);
+    if (shift != m.seq_shift.end()) kf.vio = m.applyCorrection(shift->second, kf.vio);
+  }
+  m.setYawPitchRoll(kf);
+
+  Status status = Status::Ok();
+  if (prev && sequence == 0) {
+    // A loaded map (held fixed): loop_fusion saves its keyframes by index, sessions one after
+    // another, so stamps need not increase. Kept; said once.
+    if (!(stamp > prev->stamp) && !m.warned_loaded_map_stamps) {
+      m.warned_loaded_map_stamps = true;
+      std::ostringstream s;
+      s.precision(17);
+      s << who << "stamp " << stamp << " not after the previous keyframe's " << prev->stamp
+        << " in sequence 0 (a loaded map, held fixed, may be saved out of time order): kept; stamps of "
+           "sequence 0 are not checked further";
+      status = Status::Warning(s.str());
+    }
+  } else if (prev) {
+    // A live sequence: a keyframe far from the previous one or stamped implausibly is refused,
+    // unless it is the last of `jump_confirmations` consecutive keyframes that each follow the
+    // one before plausibly: then the VIO really relocated (a new segment) or the clock jumped.
+    const std::string implausible = m.implausibleStep(*prev, kf);
+    if (!implausible.empty()) {
+      Impl::Suspect& sp = m.suspect;
+      const bool follows = sp.run > 0 && sp.keyframe.sequence == sequence &&
+                           m.implausibleStep(sp.keyframe, kf).empty();
+      const int run = follows ? sp.run + 1 : 1;
+      if (run < config_.jump_confirmations) {
+        sp.run = run;
+        sp.keyframe = kf;
+        const int more = config_.jump_confirmations - run;
+        return Status::Error(who + implausible + ": refused; " + std::to_string(more) + " more consecutive " +
+                             (more == 1 ? "keyframe" : "keyframes") +
+                             " consistent with it would be taken as a relocation (jump_confirmations)");
+      }
+      const bool relocated = !((kf.vio.t - prev->vio.t).norm() <= config_.max_keyframe_jump);
+      if (relocated) kf.segment = m.next_segment--;
+      status = Status::Warning(
+          who + implausible + ": accepted after " + std::to_string(run) + " consecutive keyframes agreed (" +
+          (relocated ? "the VIO relocated: a new segment of sequence " + std::to_string(sequence) +
+                           " starts here, without odometry to the keyframes before; loops across the jump "
+                           "have no trajectory prior until one ties the two"
+                     : "a new clock") +
+          ")");
+    }
+  }
+  m.suspect.run = 0;
+
+  // X of the new keyframe: its VIO pose carried by the current drift correction of the
+  // previous keyframe of the same sequence (loop_fusion's r_drift / t_drift).
+  KeyframeState s = m.stateFromPose(kf.vio);
+  const size_t pos = m.kfs.size();
+  if (prev) {
+    const Correction drift = m.correctionBetween(m.stateFromPose(prev->vio), m.x.back(), *prev);
+    s = m.applyCorrection(drift, s, kf);
+  }
+  const bool continues = prev && prev->segment == kf.segment;
+  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - prev->vio.t).norm() : 0.0);
+  m.kfs.push_back(kf);  // (prev is not used below: push_back may move it)
+  m.x.push_back(s);
+  m.root(kf.segment);
+  m.appendMoments(pos);
+  const int n = std::max(0, config_.odometry_neighbours);
+  for (int j = n; j >= 1; --j) {
+    if (pos < static_cast<size_t>(j)) continue;
+    const size_t from = pos - j;
+    if (m.kfs[from].segment != kf.segment) continue;
+    Impl::Edge e;
+    e.from = from;
+    e.to = pos;
+    m.setOdometryCost(e);
+    m.odometry.push_back(std::move(e));
+  }
+  return status;
+}
+
+// ---- segments (union-find) ---------------------------------------------------------------
+
+int KeyframeGraph::Impl::root(int segment) {
+  auto it = seg_parent.find(segment);
+  if (it == seg_parent.end()) {
+    seg_parent[segment] = segment;
+    return segment;
+  }
+  if (it->second == segment) return segment;
+  const int r = root(it->second);
+  seg_parent[segment] = r;
+  return r;
+}
+
+int KeyframeGraph::Impl::componentOf(size_t pos) const {
+  int s = kfs[pos].segment;
+  for (auto it = seg_parent.find(s); it != seg_parent.end() && it->second != s; it = seg_parent.find(s))
+    s = it->second;
+  return s;
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion

@@ -1,0 +1,260 @@
+// INTERNAL: not part of the core's API (include core/pose_graph.h). The state behind
+// KeyframeGraph (KeyframeGraph::Impl) and the helpers its implementation files share:
+//   core/pose_graph.cpp        the graph: keyframe lookup, poses and states, edges, loops, X
+//   core/keyframe_intake.cpp   addKeyframe: plausibility, jump recovery, segments (union-find)
+//   core/trial_solve.cpp       Ceres trials over a window (trial_budget.h: deadline, cost model)
+//   core/condensed_trial.cpp   the condensed graph (core/condensed.h) of a component, and trials on it
+//   core/graph_uncertainty.cpp drift moments and covariances (core/drift.h), the chi2 estimate
+//   core/batch_solve.cpp       loop_fusion's own batch solve
+#pragma once
+
+#include "rover_loop_fusion/core/pose_graph.h"
+
+#include "rover_loop_fusion/core/ceres_compat.h"
+#include "rover_loop_fusion/core/condensed.h"
+#include "rover_loop_fusion/core/cost_functions.h"
+#include "rover_loop_fusion/core/drift.h"
+#include "rover_loop_fusion/core/trial_budget.h"
+
+#include <cmath>
+#include <cstdint>
+#include <deque>
+#include <limits>
+#include <map>
+#include <memory>
+#include <string>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+namespace rover_loop_fusion {
+namespace core {
+
+/// buildTrial's component for "every segment" (segment numbers are >= 0 or small negatives).
+constexpr int kEverySegment = std::numeric_limits<int>::min();
+
+inline bool unitQuaternion(const Eigen::Quaterniond& q, double tol) {
+  return q.coeffs().allFinite() && std::abs(q.norm() - 1.0) <= tol;
+}
+
+inline std::string describeIndex(int64_t i) { return std::to_string(static_cast<long long>(i)); }
+
+/// A rigid correction: 4-DoF keeps it to yaw + translation.
+struct Correction {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double yaw = 0;
+};
+
+struct KeyframeGraph::Impl {
+  struct Keyframe {
+    int64_t index;
+    double stamp;
+    int sequence;
+    /// Connectivity: odometry joins keyframes of one segment; loops join segments (union-find).
+    /// A sequence's first segment has the sequence's number; a keyframe jump accepted as a
+    /// relocation starts a new segment with a negative number.
+    int segment;
+    Pose vio;
+    double yaw, pitch, roll;  // of vio, radians
+  };
+  /// The last refused implausible keyframe and how many consecutive refused keyframes, each
+  /// plausible after the one before, end with it (0: none).
+  struct Suspect {
+    int run = 0;
+    Keyframe keyframe;
+  };
+  /// A relative-pose measurement between two keyframes. `information` weights its residual
+  /// (core/cost_functions.h; 4-DoF: the top-left 4 x 4 block, residual order x, y, z, yaw;
+  /// 6-DoF: all of it); null is unit information, loop_fusion's weighting (today every edge's:
+  /// a drift model fills it in).
+  struct Edge {
+    size_t from, to;  // positions; from is the older keyframe
+    std::shared_ptr<const Matrix6d> information;
+    std::shared_ptr<ceres::CostFunction> cost;
+    LoopCandidate loop;  // loops only
+  };
+  /// A trial problem over the window [first, newest] of one component.
+  struct Trial {
+    explicit Trial() : problem(compat::problemOptionsNotOwning()) {}
+    ceres::Problem problem;
+    size_t first = 0;
+    std::vector<size_t> positions;   // window keyframes, increasing
+    std::vector<int> local;          // position - first -> index into positions, or -1
+    std::vector<KeyframeState> states;  // same order as positions
+    std::deque<KeyframeState> constants;  // loop endpoints outside the window (stable addresses)
+  };
+
+  const VerifierConfig& cfg;
+  std::vector<Keyframe> kfs;
+  std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's segment
+  std::vector<KeyframeState> x;
+  std::vector<Edge> odometry;  // appended in increasing `to`
+  std::vector<Edge> loops;
+  std::map<int, int> seg_parent;     // union-find over segments
+  std::map<int, bool> seq_anchored;  // loop_fusion's sequence_loop
+  std::map<int, Correction> seq_shift;  // applied to incoming poses if anchor_incoming_keyframes
+  std::unique_ptr<ceres::LossFunction> huber;
+  std::unique_ptr<compat::ParameterManifold> angle_manifold;
+  std::unique_ptr<compat::ParameterManifold> quaternion_manifold;
+  uint64_t revision = 0;
+  size_t solves = 0;
+  // Uncertainty (decision chi2): per segment (its keyframes are contiguous positions from
+  // `start`: odometry joins only keyframes of one segment) the prefix moments of the drift
+  // model along its VIO poses.
+  struct SequenceChain {
+    size_t start = 0;
+    ChainMoments moments;
+    /// The same with loop_fusion's unit weighting (condensed trials; 4-DoF only).
+    ChainMoments unit;
+  };
+  std::map<int, SequenceChain> chains;
+  DriftModel drift;
+  Suspect suspect;
+  int next_segment = -1;
+  bool warned_loaded_map_stamps = false;
+  /// What a budgeted trial costs on this machine per window keyframe, learned from the
+  /// budgeted solves of >= 500 keyframes so far (below, fixed costs dominate): setup (build,
+  /// Ceres' preprocessing and initial evaluation, teardown) and the longest iteration. Before
+  /// the first such solve, a cautious guess (1k-20k-keyframe 4-DoF windows on a loaded 2-core
+  /// VM: ~10 + ~30 us per keyframe; 3x for 6-DoF).
+  CostRate setup_cost{0.010};
+  CostRate iteration_cost{0.030};
+
+  explicit Impl(const VerifierConfig& c)
+      : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
+        angle_manifold(new compat::AngleManifold()),
+        quaternion_manifold(compat::newQuaternionManifold()) {
+    drift.sigma_xy = c.drift_xy;
+    drift.sigma_z = c.drift_z;
+    drift.sigma_yaw = c.drift_yaw;
+    drift.min_step = c.drift_min_step;
+    if (!fourDof()) {  // autodiff 6-DoF residuals: 2-7x the 4-DoF cost (docs/results.md)
+      setup_cost.mean *= 3;
+      iteration_cost.mean *= 3;
+    }
+  }
+
+  bool fourDof() const { return cfg.mode == Mode::kFourDof; }
+
+  // ---- the graph (pose_graph.cpp): lookup, poses and states, edges, loops ------------------
+  bool find(int64_t index, size_t* pos) const;
+  KeyframeState stateFromPose(const Pose& p) const;
+  Pose poseFromState(const KeyframeState& s, const Keyframe& kf) const;
+  Eigen::Matrix3d rotationOf(const KeyframeState& s, const Keyframe& kf) const;
+  /// The correction that maps `before` onto `after` (4-DoF: yaw + translation only, like
+  /// loop_fusion's r_drift / t_drift).
+  Correction correctionBetween(const KeyframeState& before, const KeyframeState& after,
+                               const Keyframe& kf) const;
+  KeyframeState applyCorrection(const Correction& c, const KeyframeState& s, const Keyframe& kf) const;
+  Pose applyCorrection(const Correction& c, const Pose& p) const;
+  void setYawPitchRoll(Keyframe& kf) const;
+  /// s.yaw := yaw; 6-DoF: q turned about the world z axis by the change (roll and pitch kept).
+  /// A 6-DoF state's yaw is always that of its q (the chi2 decision works on x, y, z, yaw).
+  void setYaw(KeyframeState& s, double yaw) const;
+
+  /// The Ceres cost of an edge with the given measurement, weighted by its information.
+  std::shared_ptr<ceres::CostFunction> edgeCost(const Eigen::Vector3d& t_ij, double yaw_ij,
+                                                const Eigen::Quaterniond& q_ij, const Keyframe& from,
+                                                double yaw_weight, const Matrix6d* information) const;
+  void setOdometryCost(Edge& e) const;
+  void setLoopCost(Edge& e) const;
+
+  std::string checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const;
+  double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
+  /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
+  /// chain distances), so the cost grows with the number of loops, not of keyframes.
+  double pathLength(size_t from, size_t to) const;
+  /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
+  void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos);
+
+  // ---- keyframe intake and segments (keyframe_intake.cpp) ----------------------------------
+  /// Why keyframe b cannot follow keyframe a of its sequence (too far, stamp not after a's or
+  /// too long after it); empty if it can.
+  std::string implausibleStep(const Keyframe& a, const Keyframe& b) const;
+  int root(int segment);
+  /// The segment root of the keyframe at `pos` (root() without path compression).
+  int componentOf(size_t pos) const;
+
+  // ---- trials (trial_solve.cpp; the deadline and cost model: trial_budget.h) ---------------
+  void addBlocks(Trial& tr, KeyframeState& s, bool constant);
+  double* rotBlock(KeyframeState& s) const { return fourDof() ? &s.yaw : s.q; }
+  /// State of position p inside the trial, or a constant block holding x[p] if p is outside.
+  KeyframeState* stateFor(Trial& tr, size_t p);
+  void addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss);
+  /// Builds the problem over keyframes [first, newest] whose segment is in `component`
+  /// (kEverySegment: all; segment roots can be negative). from_vio: initial values from the VIO poses (loop_fusion) instead
+  /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
+  void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
+                  ceres::LossFunction* extra_loss);
+  /// Solves `tr` within the time left until start + time_budget_ms (<= 0: no limit): the
+  /// callback stops it before an iteration that would end past that; the state keeps the
+  /// last iterate. `callback` (optional) receives the iteration times.
+  SolveSummary solve(Trial& tr, int max_iterations, double time_budget_ms, Clock::time_point start,
+                     DeadlineCallback* callback = nullptr);
+  /// Learns setup_cost / iteration_cost from a budgeted trial.
+  void learnCost(size_t window, double total_ms, const DeadlineCallback& callback);
+  size_t windowStart(size_t match_pos) const;
+  void adopt(const std::vector<size_t>& positions, const std::vector<KeyframeState>& states);
+
+  // ---- the condensed graph and condensed trials (condensed_trial.cpp; core/condensed.h) ----
+  /// The accepted loops of a component as condensed-graph edges: loops of one revisit within
+  /// kMergeKeyframes (query and match) merged into one edge with the information of all;
+  /// beyond the cap, the newest half kept and the older thinned evenly.
+  struct LoopRep {
+    size_t from, to;
+    const LoopCandidate* loop;
+    int count;
+  };
+  /// `cap` loops at most (max_loop_anchors or trial_loop_anchors); loops ending before `first`
+  /// left out first.
+  std::vector<LoopRep> loopReps(int component, size_t first, int cap) const;
+  std::vector<LoopRep> computeLoopReps(int component, size_t first, int cap) const;
+  /// loopReps() of the last revision asked (they change only when the loops do).
+  mutable uint64_t reps_revision = ~uint64_t(0);
+  mutable std::map<std::tuple<int, size_t, int>, std::vector<LoopRep>> reps_cache;
+  /// The condensed graph of a component on the loop ends plus `extra` positions, states from
+  /// X; sequence 0 held fixed. Fills `anchors` (positions, increasing). False if an edge's
+  /// covariance was unusable.
+  struct CondenseOptions {
+    double variance_scale = 1.0;  ///< drift model variances times this
+    /// A condensed trial over the window [first, newest] (`first` in the component): loop_fusion's
+    /// weighting (unit moments, loop edges with the loop yaw weight and the Huber loss) instead
+    /// of the drift model's; anchors up to `first` held fixed, only loops that end after it.
+    bool trial = false;
+    size_t first = 0;
+  };
+  bool condense(int component, const std::vector<size_t>& extra, const CondenseOptions& options,
+                CondensedGraph* cg, std::vector<size_t>* anchors) const;
+  /// loop_fusion's unit weighting as covariances: of a loop edge, and of one odometry step of a
+  /// chain with odometry_neighbours edges per keyframe (a uniform strain e stretches the edge to
+  /// the k-th neighbour by k e: stiffness sum k^2 per step). Yaw residuals are in degrees.
+  Eigen::Matrix4d unitLoopCovariance() const;
+  Eigen::Matrix4d unitStepCovariance() const;
+  /// Whether trials can be condensed (4-DoF with odometry; the unit moments are kept then).
+  bool condensable() const { return fourDof() && cfg.odometry_neighbours >= 1; }
+  /// The condensed trial (solveWindow); false if it could not be built or solved.
+  bool solveCondensed(size_t first, int component, size_t mpos, size_t qpos, const LoopCandidate* candidate,
+                      bool robust_candidate, int max_iterations, TrialSolution* out) const;
+  /// New states of `targets` (window positions of the component, increasing) under a condensed
+  /// solution: between two anchors of a segment the chain's conditional mean (as the linear
+  /// solve places them), before the first and after the last anchor rigidly with it.
+  std::vector<KeyframeState> expand(const TrialSolution& s, const std::vector<size_t>& targets) const;
+  /// The window of a condensed solution: [begin, end) positions, one range per segment of its
+  /// component (skip_fixed_map: not sequence 0's).
+  std::vector<std::pair<size_t, size_t>> windowRanges(const TrialSolution& s, bool skip_fixed_map) const;
+  /// Every `stride`-th keyframe of windowRanges(), increasing.
+  std::vector<size_t> windowPositions(const TrialSolution& s, size_t stride, bool skip_fixed_map) const;
+  /// Carries new anchor states to every keyframe of the component: chains between anchors by
+  /// the chain model's conditional mean, the ends rigidly with their anchor.
+  void spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg);
+
+  // ---- uncertainty (graph_uncertainty.cpp; core/drift.h) -----------------------------------
+  void appendMoments(size_t pos);
+  /// After loop_fusion's shift of a sequence: the moments of its segments from the new poses.
+  void rebuildMoments(int sequence);
+  Eigen::Matrix4d loopCovariance() const;
+};
+
+}  // namespace core
+}  // namespace rover_loop_fusion
