@@ -22,7 +22,7 @@ BatchSolveResult KeyframeGraph::solveLikeLoopFusion(int max_iterations) const {
   size_t first = m.kfs.size();
   for (const Impl::Edge& e : m.loops) first = std::min(first, e.from);
   Impl::Trial tr;
-  m.buildTrial(tr, first, kEverySegment, true, nullptr, nullptr);
+  m.buildTrial(tr, first, kEverySegment, true, {}, nullptr);
   const SolveSummary o = m.solve(tr, max_iterations, 0.0, Clock::now());
   r.iterations = o.iterations;
   r.solve_ms = o.solve_ms;

@@ -216,27 +216,32 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
 
 // ---- condensed trials (condense_min_window) --------------------------------------------
 
-bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, size_t mpos, size_t qpos,
-                                         const LoopCandidate* candidate, bool robust_candidate, int max_iterations,
-                                         TrialSolution* out) const {
+bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std::vector<TrialLoop>& loops,
+                                         bool robust_candidate, int max_iterations, TrialSolution* out) const {
   const auto t0 = Clock::now();
   // The window's first keyframe of the component is held fixed, as in the full trial.
   size_t head = first;
   while (head < kfs.size() && componentOf(head) != component) ++head;
-  if (head > mpos) return false;
+  for (const TrialLoop& l : loops)
+    if (head > l.match_pos) return false;
   CondenseOptions options;
   options.trial = true;
   options.first = head;
-  std::vector<size_t> extra = {head, mpos, qpos};
+  std::vector<size_t> extra = {head};
+  for (const TrialLoop& l : loops) {
+    extra.push_back(l.match_pos);
+    extra.push_back(l.query_pos);
+  }
   CondensedGraph cg;
   std::vector<size_t> anchors;
   if (!condense(component, extra, options, &cg, &anchors)) return false;
-  if (candidate) {
+  for (const TrialLoop& l : loops) {
+    if (!l.candidate) continue;
     CondensedEdge e;
-    e.from = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), mpos) - anchors.begin());
-    e.to = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), qpos) - anchors.begin());
-    e.t = candidate->relative_t;
-    e.yaw = candidate->relative_yaw;
+    e.from = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), l.match_pos) - anchors.begin());
+    e.to = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), l.query_pos) - anchors.begin());
+    e.t = l.candidate->relative_t;
+    e.yaw = l.candidate->relative_yaw;
     e.covariance = unitLoopCovariance();
     if (robust_candidate) e.huber = cfg.loop_huber;
     if (!cg.addEdge(e)) return false;

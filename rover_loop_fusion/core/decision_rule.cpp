@@ -53,6 +53,61 @@ class MetricRule : public DecisionRule {
   KeyframeGraph& graph_;
 };
 
+/// A variance scale of the drift model fitted to what accepted loops said about the drift
+/// (calibrate_drift): robust maximum likelihood over a log grid.
+class DriftCalibration {
+ public:
+  DriftCalibration(const VerifierConfig& config, const KeyframeGraph& graph, double initial)
+      : config_(config), graph_(graph), scale_(initial) {}
+  double scale() const { return scale_; }
+
+  void add(const Eigen::Vector4d& innovation, const Eigen::Matrix4d& chain_covariance) {
+    samples_.push_back({innovation, chain_covariance});
+    if (config_.calibrate_drift) refit();
+  }
+
+ private:
+  struct Sample {
+    Eigen::Vector4d innovation;
+    Eigen::Matrix4d chain_covariance;
+  };
+
+  void refit() {
+    // Robust maximum likelihood of one variance scale s of the drift model: each accepted loop's
+    // innovation nu ~ N(0, s C + L) (C: its chain covariance at scale 1, L: the loop's), Huber
+    // on sqrt(d2) (an accepted look-alike cannot drag s far), over a log grid of s.
+    const size_t kMinLoops = 5, kWindow = 200;
+    if (samples_.size() < kMinLoops) return;
+    const size_t first = samples_.size() > kWindow ? samples_.size() - kWindow : 0;
+    const Eigen::Matrix4d L = graph_.loopCovariance();
+    double best = scale_, best_nll = std::numeric_limits<double>::infinity();
+    for (int k = 0; k <= 80; ++k) {
+      const double s = std::exp(std::log(0.01) + k * (std::log(100.0) - std::log(0.01)) / 80.0);
+      double nll = 0.0;
+      for (size_t i = first; i < samples_.size(); ++i) {
+        const Eigen::Matrix4d S = s * samples_[i].chain_covariance + L;
+        const Eigen::LLT<Eigen::Matrix4d> llt(S);
+        if (llt.info() != Eigen::Success) continue;
+        const double d2 = samples_[i].innovation.dot(llt.solve(samples_[i].innovation));
+        const double r = std::sqrt(std::max(0.0, d2));
+        const double rho = r < 3.0 ? d2 : 6.0 * r - 9.0;
+        const Eigen::Matrix4d Lc = llt.matrixL();
+        nll += 0.5 * rho + Lc.diagonal().array().log().sum();
+      }
+      if (nll < best_nll) {
+        best_nll = nll;
+        best = s;
+      }
+    }
+    scale_ = best;
+  }
+
+  const VerifierConfig& config_;
+  const KeyframeGraph& graph_;
+  double scale_;
+  std::vector<Sample> samples_;
+};
+
 /// In units of drift: the covariance of the relative pose through the condensed graph, the
 /// chi-square gate and the look-alike test; X updated by the condensed least-squares solve.
 class Chi2Rule : public DecisionRule {
@@ -67,7 +122,7 @@ class Chi2Rule : public DecisionRule {
     // the run; the chi2 decision does not use it.)
     Eigen::Matrix4d C;
     int anchors = 0;
-    if (!graph_.relativeCovariance(mpos, qpos, drift_scale_, &C, &anchors)) {
+    if (!graph_.relativeCovariance(mpos, qpos, calibration_.scale(), &C, &anchors)) {
       out.check.passed = false;
       out.check.reason = Reason::kInvalidInput;
       out.check.detail = "no covariance of the relative pose (the condensed graph is singular)";
@@ -92,72 +147,177 @@ class Chi2Rule : public DecisionRule {
       return out;
     }
     decided->innovation = nu;
-    decided->chain_covariance = C / drift_scale_;
+    decided->chain_covariance = C / calibration_.scale();
     return out;
   }
 
   bool recheck(const LoopCandidate& c, size_t qpos, size_t mpos, Decided*) override {
     Eigen::Matrix4d C;
     Chi2Numbers n;
-    return graph_.relativeCovariance(mpos, qpos, drift_scale_, &C) &&
+    return graph_.relativeCovariance(mpos, qpos, calibration_.scale(), &C) &&
            chi2Test(config_, graph_.innovationVector(c, qpos, mpos), C + graph_.loopCovariance(), &n).passed;
   }
 
   void learn(const Decided& decided) override {
     // What each loop accepted by its verify() said about the drift.
-    calibration_.push_back({decided.innovation, decided.chain_covariance});
-    if (config_.calibrate_drift) recalibrate();
+    calibration_.add(decided.innovation, decided.chain_covariance);
   }
 
   Status adoptDecided(const Decided&, size_t qpos, bool update_estimate) override {
     if (!update_estimate) return Status::Ok();
-    return graph_.updateEstimate(qpos, drift_scale_);
+    return graph_.updateEstimate(qpos, calibration_.scale());
   }
 
-  Status updateEstimate(size_t, size_t newest, double) override { return graph_.updateEstimate(newest, drift_scale_); }
+  Status updateEstimate(size_t, size_t newest, double) override {
+    return graph_.updateEstimate(newest, calibration_.scale());
+  }
 
-  double driftScale() const override { return drift_scale_; }
+  double driftScale() const override { return calibration_.scale(); }
 
  private:
-  struct CalibrationSample {
-    Eigen::Vector4d innovation;
-    Eigen::Matrix4d chain_covariance;
-  };
-
-  void recalibrate() {
-    // Robust maximum likelihood of one variance scale s of the drift model: each accepted loop's
-    // innovation nu ~ N(0, s C + L) (C: its chain covariance at scale 1, L: the loop's), Huber
-    // on sqrt(d2) (an accepted look-alike cannot drag s far), over a log grid of s.
-    const size_t kMinLoops = 5, kWindow = 200;
-    if (calibration_.size() < kMinLoops) return;
-    const size_t first = calibration_.size() > kWindow ? calibration_.size() - kWindow : 0;
-    const Eigen::Matrix4d L = graph_.loopCovariance();
-    double best = drift_scale_, best_nll = std::numeric_limits<double>::infinity();
-    for (int k = 0; k <= 80; ++k) {
-      const double s = std::exp(std::log(0.01) + k * (std::log(100.0) - std::log(0.01)) / 80.0);
-      double nll = 0.0;
-      for (size_t i = first; i < calibration_.size(); ++i) {
-        const Eigen::Matrix4d S = s * calibration_[i].chain_covariance + L;
-        const Eigen::LLT<Eigen::Matrix4d> llt(S);
-        if (llt.info() != Eigen::Success) continue;
-        const double d2 = calibration_[i].innovation.dot(llt.solve(calibration_[i].innovation));
-        const double r = std::sqrt(std::max(0.0, d2));
-        const double rho = r < 3.0 ? d2 : 6.0 * r - 9.0;
-        const Eigen::Matrix4d Lc = llt.matrixL();
-        nll += 0.5 * rho + Lc.diagonal().array().log().sum();
-      }
-      if (nll < best_nll) {
-        best_nll = nll;
-        best = s;
-      }
-    }
-    drift_scale_ = best;
-  }
-
   const VerifierConfig& config_;
   KeyframeGraph& graph_;
-  double drift_scale_ = 1.0;
-  std::vector<CalibrationSample> calibration_;
+  DriftCalibration calibration_{config_, graph_, 1.0};
+};
+
+/// The revisit as the unit of decision: the metric and the chi2 tests per candidate (the fast
+/// path: both pass), a prompt rejection where no drift explains the innovation, and what is
+/// left held as a member of a revisit hypothesis that judge() tests as a whole. X follows the
+/// trial solves, as for metric.
+class RevisitRule : public MetricRule {
+ public:
+  RevisitRule(const VerifierConfig& config, KeyframeGraph& graph) : MetricRule(config, graph), cfg_(config), g_(graph) {}
+
+  RuleOutcome decide(const LoopCandidate& c, size_t qpos, size_t mpos, Clock::time_point t0, Verdict* measured,
+                     Decided* decided) override {
+    RuleOutcome out;
+    // The fast path: the paper's test, as decision metric.
+    out.check = metricDecision(cfg_, g_, c, qpos, mpos, -1, t0, measured, &decided->solution);
+    Eigen::Vector4d nu;
+    Eigen::Matrix4d C;
+    const bool prior = drift(c, qpos, mpos, &nu, &C);
+    if (prior) {
+      decided->innovation = nu;
+      decided->chain_covariance = C / calibration_.scale();
+    }
+    if (out.check.passed) return out;
+    // A trial that gave no answer is no evidence either way: fail closed.
+    if (out.check.reason != Reason::kInnovationAboveBound && out.check.reason != Reason::kScoreAboveThreshold)
+      return out;
+    if (!prior) {
+      out.check.detail += "; no covariance of the relative pose (the condensed graph is singular)";
+      return out;
+    }
+    Chi2Numbers n;
+    chi2Test(cfg_, nu, C + g_.loopCovariance(), &n);
+    out.d2 = n.d2;
+    const double reject = chiSquareQuantile(cfg_.revisit_reject_probability, 4);
+    std::ostringstream s;
+    s.precision(3);
+    s << std::fixed << out.check.detail << "; Mahalanobis d2 " << n.d2 << (n.d2 <= reject ? " <= " : " > ") << reject
+      << " (chi2 " << cfg_.revisit_reject_probability << ", drift scale " << calibration_.scale()
+      << "; relative position std up to " << n.sigma << " m)";
+    if (!(n.d2 <= reject)) {
+      out.check.detail = s.str() + ": no drift explains it";
+      return out;
+    }
+    out.check = Check();
+    out.hold = true;
+    out.kind = HoldKind::kRevisit;
+    out.check.detail = s.str() + ": held as a member of a revisit hypothesis";
+    return out;
+  }
+
+  bool recheck(const LoopCandidate& c, size_t qpos, size_t mpos, Decided* decided) override {
+    Eigen::Matrix4d C;
+    if (!drift(c, qpos, mpos, &decided->innovation, &C)) return false;
+    decided->chain_covariance = C / calibration_.scale();
+    return true;
+  }
+
+  void learn(const Decided& decided) override { calibration_.add(decided.innovation, decided.chain_covariance); }
+
+  double driftScale() const override { return calibration_.scale(); }
+
+  double misfit(const HeldGroup& group) override {
+    std::vector<std::pair<double, const HeldCandidate*>> d2;
+    double sigma = 0.0;
+    members(group, &d2, &sigma);
+    if (d2.empty()) return std::numeric_limits<double>::infinity();
+    std::nth_element(d2.begin(), d2.begin() + d2.size() / 2, d2.end());
+    return d2[d2.size() / 2].first;
+  }
+
+  bool judge(const HeldGroup& group, std::string* why) override {
+    // Each member against the prior as it is now; the hypothesis' fit is the median member's.
+    std::vector<std::pair<double, const HeldCandidate*>> d2;
+    double sigma = 0.0;
+    members(group, &d2, &sigma);
+    std::ostringstream s;
+    s.precision(3);
+    s << std::fixed << "revisit hypothesis of " << group.size() << " (loops " << group.front().candidate.query_index
+      << "->" << group.front().candidate.match_index << " .. " << group.back().candidate.query_index << "->"
+      << group.back().candidate.match_index << "): ";
+    if (d2.size() < static_cast<size_t>(cfg_.revisit_support)) {
+      s << "fewer than revisit_support members have a prior now";
+      *why = s.str();
+      return false;
+    }
+    if (cfg_.revisit_max_sigma > 0 && sigma > cfg_.revisit_max_sigma) {
+      s << "the prior is too weak to tell a revisit from a look-alike row (relative position std up to " << sigma
+        << " m > revisit_max_sigma " << cfg_.revisit_max_sigma << " m)";
+      *why = s.str();
+      return false;
+    }
+    std::nth_element(d2.begin(), d2.begin() + d2.size() / 2, d2.end());
+    const auto& median = d2[d2.size() / 2];
+    const double gate = chiSquareQuantile(cfg_.revisit_gate_probability, 4);
+    if (!(median.first <= gate)) {
+      s << "median Mahalanobis d2 " << median.first << " > " << gate << " (chi2 " << cfg_.revisit_gate_probability
+        << "): more than drift explains";
+      *why = s.str();
+      return false;
+    }
+    // The trial with all its loops: how far the trajectory has to bend for this revisit.
+    std::vector<LoopCandidate> loops;
+    for (const auto& d : d2) loops.push_back(d.second->candidate);
+    const TrialSolution trial = g_.solveWindow(loops, cfg_.robust_candidate, cfg_.max_iterations, 0.0);
+    Eigen::Matrix3Xd before, after;
+    const int n = g_.scoredPositions(trial, &before, &after);
+    const double score = trial.summary.finite ? deformationScore(before, after, cfg_.alignment)
+                                              : std::numeric_limits<double>::quiet_NaN();
+    const double bound = std::max(cfg_.threshold, cfg_.revisit_score_sigmas * sigma);
+    s << "median d2 " << median.first << " <= " << gate << "; trial with its " << loops.size() << " loops: score "
+      << score << " m over " << n
+      << " keyframes, bound " << bound << " m (max of threshold and " << cfg_.revisit_score_sigmas << " x std "
+      << sigma << " m)";
+    *why = s.str();
+    return trial.summary.converged && trial.summary.finite && score <= bound;
+  }
+
+ private:
+  /// The members with a prior now: their d2 (and the member), the largest position std.
+  void members(const HeldGroup& group, std::vector<std::pair<double, const HeldCandidate*>>* d2, double* sigma) const {
+    for (const HeldCandidate& h : group) {
+      Eigen::Vector4d nu;
+      Eigen::Matrix4d C;
+      if (!g_.connected(h.query_pos, h.match_pos) || !drift(h.candidate, h.query_pos, h.match_pos, &nu, &C)) continue;
+      Chi2Numbers n;
+      chi2Test(cfg_, nu, C + g_.loopCovariance(), &n);
+      d2->push_back({n.d2, &h});
+      *sigma = std::max(*sigma, n.sigma);
+    }
+  }
+
+  bool drift(const LoopCandidate& c, size_t qpos, size_t mpos, Eigen::Vector4d* nu, Eigen::Matrix4d* C) const {
+    if (!g_.relativeCovariance(mpos, qpos, calibration_.scale(), C)) return false;
+    *nu = g_.innovationVector(c, qpos, mpos);
+    return true;
+  }
+
+  const VerifierConfig& cfg_;
+  KeyframeGraph& g_;
+  DriftCalibration calibration_{cfg_, g_, 1.0};
 };
 
 }  // namespace
@@ -192,6 +352,7 @@ Check metricDecision(const VerifierConfig& config, KeyframeGraph& graph, const L
 
 std::unique_ptr<DecisionRule> makeDecisionRule(const VerifierConfig& config, KeyframeGraph& graph) {
   if (config.decision == Decision::kChi2) return std::unique_ptr<DecisionRule>(new Chi2Rule(config, graph));
+  if (config.decision == Decision::kRevisit) return std::unique_ptr<DecisionRule>(new RevisitRule(config, graph));
   return std::unique_ptr<DecisionRule>(new MetricRule(config, graph));
 }
 

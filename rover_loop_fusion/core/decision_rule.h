@@ -2,19 +2,23 @@
 // (the verifier orchestrates; the tests themselves are the pure functions of core/decision.h):
 //   MetricRule  the paper's deformation score in metres behind the innovation gate (trial solve);
 //   Chi2Rule    the innovation in units of drift: the covariance through the condensed graph,
-//               the chi-square gate and the look-alike test (no trial solve).
+//               the chi-square gate and the look-alike test (no trial solve);
+//   RevisitRule both per candidate (the fast path); what neither accepts nor rules out is held
+//               as a member of a revisit hypothesis, which judge() tests as a whole.
 // A rule decides (decide), re-decides a held candidate against the graph as it is now
 // (recheck), and keeps the estimate X in step with the graph after loops were added or
 // removed (adoptDecided, updateEstimate). It never adds or removes loops itself.
 #pragma once
 
 #include "rover_loop_fusion/core/decision.h"
+#include "rover_loop_fusion/core/held_candidates.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/types.h"
 
 #include <Eigen/Core>
 
 #include <chrono>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -30,10 +34,13 @@ struct Decided {
 };
 
 /// The outcome of decide(): the test (passed, or the reason and why), and whether a candidate
-/// that passed should be held rather than accepted (chi2's hold_sigma: the prior alone too weak).
+/// that passed should be held rather than accepted, and as what (chi2's hold_sigma: the prior
+/// alone too weak; revisit: a member of a revisit hypothesis).
 struct RuleOutcome {
   Check check;
   bool hold = false;
+  HoldKind kind = HoldKind::kWeakPrior;
+  double d2 = 0.0;  ///< the innovation's Mahalanobis distance, where the rule computed it
 };
 
 class DecisionRule {
@@ -65,6 +72,20 @@ class DecisionRule {
   virtual Status updateEstimate(size_t first, size_t newest, double time_budget_ms) = 0;
   /// The variance scale of the drift model (chi2 with calibrate_drift fits it; 1 otherwise).
   virtual double driftScale() const { return 1.0; }
+  /// decision revisit: the median Mahalanobis distance of a hypothesis' members (held members
+  /// of one revisit) against the graph and X as they are now (+inf: no member has a prior).
+  virtual double misfit(const HeldGroup& group) {
+    (void)group;
+    return std::numeric_limits<double>::infinity();
+  }
+  /// decision revisit: whether a hypothesis passes its joint test against the graph and X as
+  /// they are now (the median member within the gate, the trial's deformation within its
+  /// bound); why (not) in *why. Other rules hold no hypotheses: false.
+  virtual bool judge(const HeldGroup& group, std::string* why) {
+    *why = "no revisit hypotheses under this decision rule";
+    (void)group;
+    return false;
+  }
 };
 
 /// The rule of config.decision, deciding on `graph` (which it must outlive).

@@ -22,7 +22,9 @@ void KeyframeGraph::Impl::appendMoments(size_t pos) {
   }
   SequenceChain& ch = it->second;
   const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
-  ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(), drift.stepCovariance(length));
+  const auto given = step_covariance.find(pos);
+  ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(),
+                    given != step_covariance.end() ? given->second : drift.stepCovariance(length));
   if (condensable()) ch.unit.append(kf.vio.t, kf.vio.q.toRotationMatrix(), unitStepCovariance());
 }
 

@@ -11,9 +11,13 @@ size_t distance(size_t x, size_t y) { return x > y ? x - y : y - x; }
 
 }  // namespace
 
+size_t HeldCandidates::window(const HeldGroup& g) const {
+  return static_cast<size_t>(g.front().kind == HoldKind::kRevisit ? config_.revisit_stretch : config_.confirm_window);
+}
+
 void HeldCandidates::add(const HeldCandidate& h,
                          const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent) {
-  const size_t window = static_cast<size_t>(config_.confirm_window);
+  const size_t window = static_cast<size_t>(h.kind == HoldKind::kRevisit ? config_.revisit_stretch : config_.confirm_window);
   const size_t k = static_cast<size_t>(config_.confirm_count);
   for (HeldGroup& g : groups_) {
     const HeldCandidate& f = g.front();
@@ -36,10 +40,19 @@ size_t HeldCandidates::size() const {
 }
 
 void HeldCandidates::settle(size_t now, const Actions& act) {
+  now_ = now;
   const size_t k = static_cast<size_t>(config_.confirm_count);
   const size_t window = static_cast<size_t>(config_.confirm_window);
   for (size_t i = 0; i < groups_.size();) {
     HeldGroup& g = groups_[i];
+    if (g.front().kind == HoldKind::kRevisit) {
+      if (settleRevisit(i, act)) {
+        i = 0;  // the graph may have changed
+        continue;
+      }
+      ++i;
+      continue;
+    }
     if (g.front().kind == HoldKind::kRival) {
       // Confirmed once revoke_group agree and they outnumber the loops they contradict (until
       // then more rivals may join, or the window runs out).
@@ -56,7 +69,8 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
       // Rivals: other held groups of the same query stretch that did not join this one.
       bool blocked = false;
       for (size_t j = 0; j < groups_.size(); ++j) {
-        if (j == i || groups_[j].front().kind == HoldKind::kRival) continue;  // rivals contend with accepted loops
+        if (j == i || groups_[j].front().kind == HoldKind::kRival || groups_[j].front().kind == HoldKind::kRevisit)
+          continue;  // rivals contend with accepted loops
         if (distance(groups_[j].back().query_pos, g.back().query_pos) <= window && 2 * groups_[j].size() >= g.size())
           blocked = true;
       }
@@ -68,7 +82,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
         // Rivals too small to block are contradicted by the released group: dropped.
         for (size_t j = 0; j < groups_.size();) {
           if (distance(groups_[j].back().query_pos, released.back().query_pos) <= window &&
-              groups_[j].front().kind != HoldKind::kRival) {
+              groups_[j].front().kind != HoldKind::kRival && groups_[j].front().kind != HoldKind::kRevisit) {
             act.drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
             groups_.erase(groups_.begin() + j);
           } else {
@@ -93,6 +107,63 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
     }
     ++i;
   }
+}
+
+bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
+  const size_t stretch = static_cast<size_t>(config_.revisit_stretch);
+  const size_t now_window = static_cast<size_t>(config_.revisit_window);
+  HeldGroup& g = groups_[i];
+  auto near = [&](const HeldGroup& a, const HeldGroup& b) {
+    // Two hypotheses of one revisit: some queries of the two lie within the stretch.
+    const size_t a0 = a.front().query_pos, a1 = a.back().query_pos, b0 = b.front().query_pos, b1 = b.back().query_pos;
+    return !(a1 + stretch < b0 || b1 + stretch < a0);
+  };
+  if (g.size() >= static_cast<size_t>(config_.revisit_support)) {
+    std::string why;
+    if (!act.judge(g, &why)) {
+      const HeldGroup failed = g;
+      groups_.erase(groups_.begin() + i);
+      act.drop(failed, why);
+      return true;
+    }
+    // Rival hypotheses of the same revisit compete by fit and support: the release waits until
+    // this one is better than every rival by revisit_margin (or the window runs out).
+    auto misfit = [&](const HeldGroup& h) {
+      return act.misfit(h) - config_.revisit_member_weight * static_cast<double>(h.size() - 1);
+    };
+    const double mine = misfit(g);
+    bool blocked = false;
+    for (size_t j = 0; j < groups_.size() && !blocked; ++j)
+      if (j != i && groups_[j].front().kind == HoldKind::kRevisit && near(groups_[j], g) &&
+          !(mine + config_.revisit_margin < misfit(groups_[j])))
+        blocked = true;
+    if (!blocked) {
+      HeldGroup released;
+      released.swap(g);
+      groups_.erase(groups_.begin() + i);
+      act.release(released);
+      // The rivals of the released hypothesis contradict it: dropped.
+      for (size_t j = 0; j < groups_.size();) {
+        if (groups_[j].front().kind == HoldKind::kRevisit && near(groups_[j], released)) {
+          act.drop(groups_[j], "a larger hypothesis of the same revisit was released");
+          groups_.erase(groups_.begin() + j);
+        } else {
+          ++j;
+        }
+      }
+      return true;
+    }
+  }
+  if (now_ > g.front().arrived + now_window) {
+    std::ostringstream s;
+    s << "its revisit hypothesis (" << g.size() << " of revisit_support=" << config_.revisit_support
+      << " members) was not released within revisit_window=" << now_window << " keyframes";
+    const HeldGroup expired = g;
+    groups_.erase(groups_.begin() + i);
+    act.drop(expired, s.str());
+    return true;
+  }
+  return false;
 }
 
 }  // namespace core

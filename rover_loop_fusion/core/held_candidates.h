@@ -3,7 +3,12 @@
 //               once confirm_count of one stretch agree with each other;
 //   kWeakPrior  passed the chi2 tests on a prior too weak to trust alone (hold_sigma): the same;
 //   kRival      rejected for contradicting an accepted loop of its stretch (revoke_group): a
-//               group that outnumbers those loops is decided against the graph without them.
+//               group that outnumbers those loops is decided against the graph without them;
+//   kRevisit    decision revisit: not accepted alone, not ruled out by the drift model; a
+//               hypothesis of revisit_support members that passes its joint test against the
+//               prior (Actions::judge) and that no rival hypothesis of its stretch competes with
+//               is released; one that fails its test or waits longer than revisit_window is
+//               dropped.
 // This unit owns the bookkeeping: which held candidates form a group (same kind, same segments,
 // queries within confirm_window, every pair of the last confirm_count consistent), which group
 // is due (confirmed, expired, blocked by a rival group of its stretch) and in which order. What
@@ -20,7 +25,7 @@
 namespace rover_loop_fusion {
 namespace core {
 
-enum class HoldKind { kNoPrior, kWeakPrior, kRival };
+enum class HoldKind { kNoPrior, kWeakPrior, kRival, kRevisit };
 
 struct HeldCandidate {
   LoopCandidate candidate;
@@ -28,6 +33,7 @@ struct HeldCandidate {
   int query_segment = 0, match_segment = 0;
   size_t arrived = 0;  ///< keyframes in the graph when it was held
   HoldKind kind = HoldKind::kNoPrior;
+  double d2 = 0.0;     ///< kRevisit: its innovation's Mahalanobis distance when it was held
 };
 using HeldGroup = std::vector<HeldCandidate>;
 
@@ -53,6 +59,11 @@ class HeldCandidates {
     std::function<void(const HeldGroup&)> release;
     /// A group given up, with why.
     std::function<void(const HeldGroup&, const std::string&)> drop;
+    /// kRevisit: whether a hypothesis passes its joint test against the prior now (why not in
+    /// *why).
+    std::function<bool(const HeldGroup&, std::string* why)> judge;
+    /// kRevisit: the median Mahalanobis distance of a hypothesis' members now.
+    std::function<double(const HeldGroup&)> misfit;
   };
   /// Acts on every group that is due at `now` keyframes: confirmed groups (released, or rivals
   /// settled), rival groups too small to block a released one (dropped), expired groups
@@ -60,8 +71,12 @@ class HeldCandidates {
   void settle(size_t now, const Actions& act);
 
  private:
+  /// decision revisit: settles the kRevisit group at `i`; true if it acted (the group is gone).
+  bool settleRevisit(size_t i, const Actions& act);
+  size_t window(const HeldGroup& g) const;
   const VerifierConfig& config_;
   std::vector<HeldGroup> groups_;  ///< by revisit, oldest first
+  size_t now_ = 0;                 ///< keyframes at the settle() running
 };
 
 }  // namespace core

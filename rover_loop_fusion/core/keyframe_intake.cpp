@@ -6,6 +6,8 @@
 // odometry joins keyframes of one segment, loops join segments.
 #include "rover_loop_fusion/core/pose_graph_impl.h"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -37,7 +39,7 @@ std::string KeyframeGraph::Impl::implausibleStep(const Keyframe& a, const Keyfra
 }
 
 Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
-                              const Eigen::Quaterniond& q) {
+                              const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance) {
   Impl& m = *impl_;
   const std::string who = "keyframe " + describeIndex(index) + ": ";
   if (index < 0) return Status::Error(who + "negative index");
@@ -130,6 +132,18 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
   m.kfs.push_back(kf);  // (prev is not used below: push_back may move it)
   m.x.push_back(s);
   m.root(kf.segment);
+  if (step_covariance) {
+    const Eigen::Matrix4d& C = *step_covariance;
+    const Eigen::LLT<Eigen::Matrix4d> llt(0.5 * (C + C.transpose()));
+    if (C.allFinite() && (C - C.transpose()).cwiseAbs().maxCoeff() <= 1e-9 * (1.0 + C.cwiseAbs().maxCoeff()) &&
+        llt.info() == Eigen::Success) {
+      m.step_covariance[pos] = C;
+    } else {
+      const std::string ignored = who + "its step covariance is not finite, symmetric and positive definite: the drift "
+                                        "model's is used instead";
+      status = status.message.empty() ? Status::Warning(ignored) : Status::Warning(status.message + "; " + ignored);
+    }
+  }
   m.appendMoments(pos);
   const int n = std::max(0, config_.odometry_neighbours);
   for (int j = n; j >= 1; --j) {

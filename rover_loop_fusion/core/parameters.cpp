@@ -88,9 +88,10 @@ std::vector<Parameter> makeTable() {
   using C = VerifierConfig;
   std::vector<Parameter> t;
   // How candidates are decided (core/decision.h).
-  Parameter decision = choice("decision", {"metric", "chi2"},
+  Parameter decision = choice("decision", {"metric", "chi2", "revisit"},
                               "metric: threshold and innovation gate in metres (the paper's method); chi2: in "
-                              "units of drift (drift_* model, gate_probability, lookalike_*; 6-DoF: on x, y, z, yaw)");
+                              "units of drift (drift_* model, gate_probability, lookalike_*; 6-DoF: on x, y, z, yaw); "
+                              "revisit: both per candidate, and the rest judged by revisit (revisit_*)");
   decision.get = [](const C& c) { return ParameterValue::Text(toString(c.decision)); };
   decision.set = [](C* c, const ParameterValue& v, bool) { parseDecision(v.text, &c->decision); };
   t.push_back(decision);
@@ -212,6 +213,29 @@ std::vector<Parameter> makeTable() {
   t.push_back(confirm);
   t.push_back(boolean("calibrate_drift", &C::calibrate_drift,
                       "scale the drift model to the innovations of the accepted loops (robust fit)"));
+  // decision: revisit (core/decision_rule.h, core/held_candidates.h).
+  t.push_back(integer("revisit_support", "", &C::revisit_support, 2, 100,
+                      "members a revisit hypothesis needs before it can be released"));
+  t.push_back(integer("revisit_window", "keyframes", &C::revisit_window, 1, 100000,
+                      "a revisit hypothesis not released within this many keyframes after its first member is "
+                      "dropped"));
+  t.push_back(integer("revisit_stretch", "keyframes", &C::revisit_stretch, 1, 100000,
+                      "queries at most this many keyframes apart belong to one revisit (members, rivals)"));
+  t.push_back(number("revisit_reject_probability", "", &C::revisit_reject_probability, 0.5, 1.0 - 1e-12, false,
+                     "candidates beyond this chi-square quantile are rejected at once; the rest that the fast "
+                     "path does not accept are held"));
+  t.push_back(number("revisit_gate_probability", "", &C::revisit_gate_probability, 0.5, 1.0 - 1e-12, false,
+                     "a hypothesis' median member must lie within this chi-square quantile of the prior"));
+  t.push_back(number("revisit_max_sigma", "m", &C::revisit_max_sigma, 0.0, 1000.0, false,
+                     "a hypothesis whose relative position std exceeds this is not released; 0: no bound"));
+  t.push_back(number("revisit_score_sigmas", "", &C::revisit_score_sigmas, 0.0, 100.0, false,
+                     "a hypothesis' trial score must be at most max(threshold, this x the relative "
+                     "position's largest standard deviation)"));
+  t.push_back(number("revisit_member_weight", "", &C::revisit_member_weight, 0.0, 100.0, false,
+                     "what each member beyond the first takes off a hypothesis' misfit (its median "
+                     "Mahalanobis distance) when rivals compete"));
+  t.push_back(number("revisit_margin", "", &C::revisit_margin, 0.0, 100.0, false,
+                     "a hypothesis is released only if its misfit is lower than every rival's by this"));
   return t;
 }
 

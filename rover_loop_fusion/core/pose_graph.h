@@ -87,8 +87,13 @@ class KeyframeGraph {
   /// warning: a relocation starts a new segment, or a new clock). Sequence 0 (a loaded map,
   /// held fixed) may come out of time order: kept, with one warning. Refused input leaves the
   /// graph unchanged; ok with a message is a warning.
+  /// `step_covariance` (optional): the covariance of the odometry step from the previous
+  /// keyframe of its sequence to this one (x, y, z, yaw in this keyframe's frame), where the
+  /// data carries it (g2o files); the uncertainty (decision chi2, revisit) uses it instead of the
+  /// drift model's for that step. One that is not finite or not positive definite is ignored
+  /// with a warning.
   Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
-                     const Eigen::Quaterniond& q);
+                     const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance = nullptr);
   size_t keyframeCount() const;
   bool hasKeyframe(int64_t index) const;
   /// Position (0 = oldest) of the keyframe with this index; false if unknown.
@@ -140,6 +145,11 @@ class KeyframeGraph {
   TrialSolution solveWindow(size_t match_pos, size_t query_pos, const LoopCandidate* candidate,
                             bool robust_candidate, int max_iterations, double time_budget_ms,
                             int condense_min_window = -1);
+  /// A trial with several candidate loops at once (decision revisit: a hypothesis' members),
+  /// as above: the window from the earliest match on, the component of the last candidate's
+  /// query. Candidates with unknown keyframes are left out (none left: a failed solution).
+  TrialSolution solveWindow(const std::vector<LoopCandidate>& candidates, bool robust_candidate, int max_iterations,
+                            double time_budget_ms);
   /// Positions of the keyframes of a solution that may move (not sequence 0), in X (`before`)
   /// and in the solution (`after`), 3 x N each (a condensed trial: at most
   /// kCondensedScoredKeyframes of them, evenly spaced). Returns N.

@@ -24,11 +24,19 @@
 #include <memory>
 #include <string>
 #include <tuple>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
 namespace rover_loop_fusion {
 namespace core {
+
+/// A loop of a trial that is not (yet) in the graph: its ends and the candidate (nullptr: no
+/// edge; a trial without a candidate still keeps its ends as anchors).
+struct TrialLoop {
+  size_t match_pos = 0, query_pos = 0;
+  const LoopCandidate* candidate = nullptr;
+};
 
 /// buildTrial's component for "every segment" (segment numbers are >= 0 or small negatives).
 constexpr int kEverySegment = std::numeric_limits<int>::min();
@@ -109,6 +117,11 @@ struct KeyframeGraph::Impl {
     ChainMoments unit;
   };
   std::map<int, SequenceChain> chains;
+  /// Step covariances handed in with keyframes (addKeyframe), by position; the drift model's
+  /// for the others.
+  std::unordered_map<size_t, Eigen::Matrix4d, std::hash<size_t>, std::equal_to<size_t>,
+                     Eigen::aligned_allocator<std::pair<const size_t, Eigen::Matrix4d>>>
+      step_covariance;
   DriftModel drift;
   Suspect suspect;
   int next_segment = -1;
@@ -185,7 +198,7 @@ struct KeyframeGraph::Impl {
   /// Builds the problem over keyframes [first, newest] whose segment is in `component`
   /// (kEverySegment: all; segment roots can be negative). from_vio: initial values from the VIO poses (loop_fusion) instead
   /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
-  void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
+  void buildTrial(Trial& tr, size_t first, int component, bool from_vio, const std::vector<Edge>& extra,
                   ceres::LossFunction* extra_loss);
   /// Solves `tr` within the time left until start + time_budget_ms (<= 0: no limit): the
   /// callback stops it before an iteration that would end past that; the state keeps the
@@ -233,9 +246,14 @@ struct KeyframeGraph::Impl {
   Eigen::Matrix4d unitStepCovariance() const;
   /// Whether trials can be condensed (4-DoF with odometry; the unit moments are kept then).
   bool condensable() const { return fourDof() && cfg.odometry_neighbours >= 1; }
-  /// The condensed trial (solveWindow); false if it could not be built or solved.
-  bool solveCondensed(size_t first, int component, size_t mpos, size_t qpos, const LoopCandidate* candidate,
-                      bool robust_candidate, int max_iterations, TrialSolution* out) const;
+  /// The condensed trial (solveWindow) with the `candidates` (their loops as extra edges; a
+  /// TrialLoop without a candidate only makes its ends anchors); false if it could not be built
+  /// or solved.
+  bool solveCondensed(size_t first, int component, const std::vector<TrialLoop>& candidates, bool robust_candidate,
+                      int max_iterations, TrialSolution* out) const;
+  /// The trial behind both solveWindow()s.
+  TrialSolution solveTrial(const std::vector<TrialLoop>& candidates, bool robust_candidate, int max_iterations,
+                           double time_budget_ms, int condense_min_window);
   /// New states of `targets` (window positions of the component, increasing) under a condensed
   /// solution: between two anchors of a segment the chain's conditional mean (as the linear
   /// solve places them), before the first and after the last anchor rigidly with it.

@@ -47,8 +47,8 @@ void KeyframeGraph::Impl::addEdge(Trial& tr, const Edge& e, ceres::LossFunction*
   tr.problem.AddResidualBlock(e.cost.get(), loss, rotBlock(*a), a->t, rotBlock(*b), b->t);
 }
 
-void KeyframeGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool from_vio, const Edge* extra,
-                                 ceres::LossFunction* extra_loss) {
+void KeyframeGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool from_vio,
+                                     const std::vector<Edge>& extra, ceres::LossFunction* extra_loss) {
   tr.first = first;
   tr.local.assign(kfs.size() - first, -1);
   for (size_t p = first; p < kfs.size(); ++p) {
@@ -68,7 +68,7 @@ void KeyframeGraph::Impl::buildTrial(Trial& tr, size_t first, int component, boo
   for (const Edge& e : loops) {
     if (inWindow(e.to)) addEdge(tr, e, huber.get());
   }
-  if (extra) addEdge(tr, *extra, extra_loss);
+  for (const Edge& e : extra) addEdge(tr, e, extra_loss);
 }
 
 SolveSummary KeyframeGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms,
@@ -141,15 +141,44 @@ void KeyframeGraph::Impl::adopt(const std::vector<size_t>& positions,
 TrialSolution KeyframeGraph::solveWindow(size_t mpos, size_t qpos, const LoopCandidate* candidate,
                                          bool robust_candidate, int max_iterations, double time_budget_ms,
                                          int condense_min_window) {
+  TrialLoop loop;
+  loop.match_pos = mpos;
+  loop.query_pos = qpos;
+  loop.candidate = candidate;
+  return impl_->solveTrial({loop}, robust_candidate, max_iterations, time_budget_ms, condense_min_window);
+}
+
+TrialSolution KeyframeGraph::solveWindow(const std::vector<LoopCandidate>& candidates, bool robust_candidate,
+                                         int max_iterations, double time_budget_ms) {
+  std::vector<TrialLoop> loops;
+  for (const LoopCandidate& c : candidates) {
+    TrialLoop l;
+    if (!impl_->find(c.query_index, &l.query_pos) || !impl_->find(c.match_index, &l.match_pos)) continue;
+    l.candidate = &c;
+    loops.push_back(l);
+  }
+  if (loops.empty()) {
+    TrialSolution out;
+    out.summary.message = "no candidate of the trial is in the graph";
+    return out;
+  }
+  return impl_->solveTrial(loops, robust_candidate, max_iterations, time_budget_ms, -1);
+}
+
+TrialSolution KeyframeGraph::Impl::solveTrial(const std::vector<TrialLoop>& loops, bool robust_candidate,
+                                              int max_iterations, double time_budget_ms, int condense_min_window) {
   const auto start = Clock::now();
-  Impl& m = *impl_;
+  Impl& m = *this;
   TrialSolution out;
+  // The window from the earliest match on; the component of the last query.
+  size_t mpos = loops.front().match_pos;
+  for (const TrialLoop& l : loops) mpos = std::min(mpos, l.match_pos);
+  const size_t qpos = loops.back().query_pos;
   const size_t first = m.windowStart(mpos);
   const size_t window = m.kfs.size() - first;  // the trial's keyframes, at most
   const int condense_above = condense_min_window >= 0 ? condense_min_window : m.cfg.condense_min_window;
   if (m.condensable() && condense_above > 0 && window > static_cast<size_t>(condense_above) &&
-      m.solveCondensed(first, m.root(m.kfs[qpos].segment), mpos, qpos, candidate, robust_candidate, max_iterations,
-                       &out))
+      m.solveCondensed(first, m.root(m.kfs[qpos].segment), loops, robust_candidate, max_iterations, &out))
     return out;
   out = TrialSolution();
   const double first_iteration_ms = window * m.iteration_cost.predict();
@@ -176,20 +205,22 @@ TrialSolution KeyframeGraph::solveWindow(size_t mpos, size_t qpos, const LoopCan
       return out;
     }
   }
-  Impl::Edge extra;
-  if (candidate) {
-    extra.from = mpos;
-    extra.to = qpos;
-    extra.loop = *candidate;
-    m.setLoopCost(extra);
+  std::vector<Edge> extra;
+  for (const TrialLoop& l : loops) {
+    if (!l.candidate) continue;
+    Edge e;
+    e.from = l.match_pos;
+    e.to = l.query_pos;
+    e.loop = *l.candidate;
+    m.setLoopCost(e);
+    extra.push_back(e);
   }
   DeadlineCallback callback(start + std::chrono::duration_cast<Clock::duration>(
                                         std::chrono::duration<double, std::milli>(std::max(0.0, solve_budget_ms))),
                             first_iteration_ms);
   {
-    Impl::Trial tr;
-    m.buildTrial(tr, first, m.root(m.kfs[qpos].segment), false, candidate ? &extra : nullptr,
-                 robust_candidate ? m.huber.get() : nullptr);
+    Trial tr;
+    m.buildTrial(tr, first, m.root(m.kfs[qpos].segment), false, extra, robust_candidate ? m.huber.get() : nullptr);
     out.summary = m.solve(tr, max_iterations, time_budget_ms, start, &callback);
     out.positions = std::move(tr.positions);
     out.states = std::move(tr.states);

@@ -29,10 +29,18 @@ const char* toString(Alignment alignment) {
   return alignment == Alignment::kSE3 ? "se3" : "sim3";
 }
 
-const char* toString(Decision decision) { return decision == Decision::kChi2 ? "chi2" : "metric"; }
+const char* toString(Decision decision) {
+  switch (decision) {
+    case Decision::kChi2: return "chi2";
+    case Decision::kRevisit: return "revisit";
+    case Decision::kMetric: break;
+  }
+  return "metric";
+}
 
 bool parseDecision(const std::string& s, Decision* decision) {
   if (s == "chi2") *decision = Decision::kChi2;
+  else if (s == "revisit") *decision = Decision::kRevisit;
   else if (s == "metric") *decision = Decision::kMetric;
   else return false;
   return true;

@@ -32,7 +32,16 @@ enum class Alignment { kSE3, kSim3 };
 ///   6-DoF (VO): the same test on x, y, z and yaw of the 6-DoF poses (the drift model has no
 ///   roll and pitch: their effect on the position belongs in drift_xy / drift_z), and the
 ///   estimate is updated in those four (roll and pitch stay the VO's).
-enum class Decision { kMetric, kChi2 };
+/// kRevisit: the revisit as the unit of decision (docs/method.md). A candidate that passes the
+///   metric test is accepted at once (the fast path, where the prior is tight); one that fails
+///   it but that the drift model does not rule out (revisit_reject_probability) is held as a
+///   member of a revisit hypothesis (mutually consistent candidates of one stretch), which is
+///   released as a group once it has revisit_support members, does not contradict the accepted
+///   loops of its stretch, lies within the prior (revisit_gate_probability), bends the
+///   trajectory with all its loops by at most max(threshold, revisit_score_sigmas x std) and
+///   fits better than every rival hypothesis of its revisit (revisit_member_weight,
+///   revisit_margin); dropped if that does not happen within revisit_window keyframes.
+enum class Decision { kMetric, kChi2, kRevisit };
 
 /// Why a verdict came out the way it did. Exactly one per verdict.
 enum class Reason {
@@ -310,6 +319,35 @@ struct VerifierConfig {
   /// robust maximum-likelihood fit, clamped to [1/100, 100]): the user need not know the VIO's
   /// drift rate exactly.
   bool calibrate_drift = false;
+
+  // ---- decision: revisit (docs/method.md) ------------------------------------------------
+  /// Members a revisit hypothesis needs before it can be released.
+  int revisit_support = 3;
+  /// A hypothesis not released within this many keyframes after its first member arrived is
+  /// dropped (the bound on the delay of a release).
+  int revisit_window = 60;
+  /// Queries at most this many keyframes apart belong to one revisit: members of one
+  /// hypothesis, and rival hypotheses that compete with it.
+  int revisit_stretch = 40;
+  /// Candidates whose innovation's Mahalanobis distance exceeds this chi-square quantile are
+  /// rejected at once (no drift explains them); the rest that the fast path does not accept
+  /// are held.
+  double revisit_reject_probability = 0.999999;
+  /// A hypothesis' median member must lie within this chi-square quantile of the prior (4 dof)
+  /// to be released.
+  double revisit_gate_probability = 0.999;
+  /// A hypothesis whose relative position std exceeds this [m] is not released: the prior is
+  /// too weak to tell a revisit from a row of look-alikes (0: no bound).
+  double revisit_max_sigma = 0.0;
+  /// The hypothesis' trial: its deformation score must be at most
+  /// max(threshold, revisit_score_sigmas x the relative position's largest standard deviation).
+  double revisit_score_sigmas = 0.7;
+  /// Rival hypotheses of one revisit compete by misfit = median Mahalanobis distance of their
+  /// members minus revisit_member_weight per member beyond the first (support counts, in units
+  /// of d2); a hypothesis is released only if its misfit is lower than every rival's by
+  /// revisit_margin.
+  double revisit_member_weight = 1.0;
+  double revisit_margin = 4.0;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.

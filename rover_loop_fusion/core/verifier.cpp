@@ -49,9 +49,9 @@ Verifier::Verifier(const VerifierConfig& config)
 Verifier::~Verifier() = default;
 
 Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
-                             const Eigen::Quaterniond& q) {
+                             const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance) {
   std::lock_guard<std::mutex> lock(mutex_);
-  const Status s = graph_.addKeyframe(index, stamp, sequence, t, q);
+  const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
   if (!held_.empty()) settle();
   return s;
 }
@@ -104,7 +104,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   const RuleOutcome out = rule_->decide(c, qpos, mpos, t0, &measured, &decided);
   if (!out.check.passed) return rejectOrHold(out.check);
   if (out.hold) {
-    hold(c, qpos, mpos, HoldKind::kWeakPrior);
+    hold(c, qpos, mpos, out.kind, out.d2);
     return withNumbers(Verdict::Defer(c, out.check.detail), measured, t0);
   }
   pending_.valid = true;
@@ -281,11 +281,12 @@ int Verifier::cycleTest(const HeldCandidate& a, const HeldCandidate& b, bool fro
   return mahalanobis(r, S) <= chiSquareQuantile(config_.gate_probability, 4) ? 1 : 0;
 }
 
-void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind) {
+void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind, double d2) {
   HeldCandidate h = heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;
   h.kind = kind;
+  h.d2 = d2;
   held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
   settle();
 }
@@ -309,38 +310,72 @@ void Verifier::settle() {
   act.settle_rivals = [this](const HeldGroup& g, const std::vector<LoopCandidate>& loops) { settleRivals(g, loops); };
   act.release = [this](const HeldGroup& g) { release(g); };
   act.drop = [this](const HeldGroup& g, const std::string& why) { drop(g, why); };
+  act.judge = [this](const HeldGroup& g, std::string* why) { return judgeRevisit(g, why); };
+  act.misfit = [this](const HeldGroup& g) { return rule_->misfit(g); };
   held_.settle(graph_.keyframeCount(), act);
+}
+
+bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
+  // A hypothesis that contradicts accepted loops of its stretch is not released: the accepted
+  // loops passed alone or with their own revisit, and a look-alike row contradicts them.
+  size_t contradicting = 0;
+  LoopCandidate example;
+  for (const HeldCandidate& h : group) {
+    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit_stretch));
+    if (!against.empty()) {
+      ++contradicting;
+      example = against.front();
+    }
+  }
+  if (2 * contradicting > group.size()) {
+    std::ostringstream s;
+    s << "revisit hypothesis of " << group.size() << ": " << contradicting
+      << " of its members contradict accepted loops of their stretch (e.g. " << example.query_index << "->"
+      << example.match_index << ")";
+    *why = s.str();
+    return false;
+  }
+  return rule_->judge(group, why);
 }
 
 void Verifier::release(const HeldGroup& group) {
   std::ostringstream why;
-  why << "confirmed: " << group.size() << " held candidates agree with each other (loops "
-      << group.front().candidate.query_index << "->" << group.front().candidate.match_index << " .. "
+  const bool revisit = group.front().kind == HoldKind::kRevisit;
+  if (revisit)
+    why << "released with its revisit hypothesis: " << group.size() << " mutually consistent candidates (loops ";
+  else
+    why << "confirmed: " << group.size() << " held candidates agree with each other (loops ";
+  why << group.front().candidate.query_index << "->" << group.front().candidate.match_index << " .. "
       << group.back().candidate.query_index << "->" << group.back().candidate.match_index << ")";
   std::vector<const HeldCandidate*> committed;
+  size_t first_match = group.front().match_pos;
   for (const HeldCandidate& h : group) {
-    // A candidate with a prior must still pass the test against the graph as it is now.
-    Decided unused;
-    if (h.kind != HoldKind::kNoPrior && graph_.connected(h.query_pos, h.match_pos) &&
-        !rule_->recheck(h.candidate, h.query_pos, h.match_pos, &unused)) {
+    // A candidate held on a weak prior must still pass the test against the graph as it is now
+    // (a revisit hypothesis was judged as a whole just now).
+    Decided decided;
+    if (h.kind == HoldKind::kWeakPrior && graph_.connected(h.query_pos, h.match_pos) &&
+        !rule_->recheck(h.candidate, h.query_pos, h.match_pos, &decided)) {
       decide(LoopDecision::Kind::kDrop, h.candidate,
              Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed with its revisit but no longer consistent with the graph"));
       continue;
     }
+    const bool learn = revisit && rule_->recheck(h.candidate, h.query_pos, h.match_pos, &decided);
     pending_.valid = false;
     const Status s = commitLocked(h.candidate, false);
     if (!s.ok) {
       decide(LoopDecision::Kind::kDrop, h.candidate,
              Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed but not committed: " + s.message));
     } else {
+      if (learn) rule_->learn(decided);  // what a confirmed revisit says about the drift
       decide(LoopDecision::Kind::kRelease, h.candidate, Verdict::Accept(h.candidate, why.str()));
       committed.push_back(&h);
+      if (revisit) first_match = std::min(first_match, h.match_pos);
     }
   }
   if (committed.empty()) return;
   // One update of the estimate for the whole group; in the host's loop-closure path like a
   // commit: bounded when the group had no prior.
-  rule_->updateEstimate(committed.front()->match_pos, committed.back()->query_pos,
+  rule_->updateEstimate(revisit ? first_match : committed.front()->match_pos, committed.back()->query_pos,
                         committed.front()->kind == HoldKind::kNoPrior ? config_.time_budget_ms : 0.0);
 }
 
@@ -357,8 +392,7 @@ HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
   return h;
 }
 
-std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h) const {
-  const size_t window = static_cast<size_t>(config_.confirm_window);
+std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window) const {
   const size_t first = h.query_pos > window ? h.query_pos - window : 0;
   std::vector<LoopCandidate> out;
   for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
@@ -378,7 +412,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
-  const std::vector<LoopCandidate> against = contradicted(h);
+  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.confirm_window));
   if (against.empty()) return false;
   std::ostringstream s;
   s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
@@ -394,7 +428,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
 std::vector<LoopCandidate> Verifier::rivalTargets(const HeldGroup& group) const {
   std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
   for (const HeldCandidate& h : group)
-    for (const LoopCandidate& l : contradicted(h)) {
+    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.confirm_window))) {
       auto& v = votes[{l.query_index, l.match_index}];
       v.first = l;
       ++v.second;

@@ -70,7 +70,7 @@ class Verifier {
   /// recovery from a jump). Refused input leaves the graph unchanged; ok with a message is a
   /// warning for the host's log.
   Status addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
-                     const Eigen::Quaterniond& q);
+                     const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance = nullptr);
 
   /// Scores a candidate against the trajectory prior. Does not change the graph; a deferred
   /// verdict holds the candidate (see the protocol above).
@@ -120,14 +120,17 @@ class Verifier {
 
  private:
   /// Holds a candidate (a deferred verdict) and settles what is due.
-  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind);
+  void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind, double d2 = 0.0);
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
   /// revoke_group: holds a candidate rejected for `reason` as a rival if it contradicts an
   /// accepted loop of its stretch (appends why to *detail); false if it stays rejected.
   bool holdAsRival(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
-  /// The accepted loops of the stretch of `h` (queries within confirm_window) that the cycle
-  /// test finds inconsistent with it.
-  std::vector<LoopCandidate> contradicted(const HeldCandidate& h) const;
+  /// The accepted loops of the stretch of `h` (queries within `window` keyframes) that the
+  /// cycle test (along the VIO odometry) finds inconsistent with it.
+  std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window) const;
+  /// decision revisit: the joint test of a hypothesis (Actions::judge): it must not contradict
+  /// the accepted loops of its stretch, and must pass the rule's test against the prior.
+  bool judgeRevisit(const HeldGroup& group, std::string* why);
   /// The accepted loops a group of rivals contradicts: those of its stretch that most of its
   /// members are inconsistent with.
   std::vector<LoopCandidate> rivalTargets(const HeldGroup& group) const;

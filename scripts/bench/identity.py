@@ -89,15 +89,18 @@ def strip(src, dst):
 
 
 def replay_one(job):
-    entry, config, protocol, out, replay, libdir = job
+    entry, config, protocol, out, replay, libdir, config_dir = job
     d = os.path.join(out, entry["family"], entry["case"])
     os.makedirs(d, exist_ok=True)
     if os.path.exists(os.path.join(d, f"{config}-{protocol}.csv")):  # done by an interrupted run
         return None
     tmp = os.path.join(d, f".{config}-{protocol}")
     shutil.rmtree(tmp, ignore_errors=True)  # left by an interrupted run
+    flags = list(entry["flags"])
+    if config_dir:  # the YAMLs of another commit (a build that does not know today's keys)
+        flags = [os.path.join(config_dir, os.path.basename(f)) if f.endswith(".yaml") else f for f in flags]
     cmd = [replay, "--scenario", entry["dir"], "--out", tmp, "--protocol", protocol, "--quiet"] + \
-        entry["flags"] + CONFIGS[config]
+        flags + CONFIGS[config]
     env = dict(os.environ)
     if libdir:
         env["LD_LIBRARY_PATH"] = libdir
@@ -120,7 +123,7 @@ def run(a):
     libdir = a.lib or (os.path.join(os.path.dirname(replay), "lib") if a.replay else None)
     out = os.path.join(a.out, a.tag)
     configs = a.configs.split(",") if a.configs else list(CONFIGS)
-    jobs = [(e, c, p, out, replay, libdir) for e in manifest for c in configs for p in PROTOCOLS
+    jobs = [(e, c, p, out, replay, libdir, a.config_dir) for e in manifest for c in configs for p in PROTOCOLS
             if (c, e["family"]) not in SKIP]
     errors = []
     with ProcessPoolExecutor(a.jobs) as ex:
@@ -179,6 +182,8 @@ def main(argv=None):
     ap.add_argument("--replay", help="run: a rover_replay binary (default: the workspace's)")
     ap.add_argument("--lib", help="run: its libraries (default with --replay: DIR/lib beside it)")
     ap.add_argument("--configs", help=f"run: a subset of {','.join(CONFIGS)}")
+    ap.add_argument("--config-dir", help="run: read the shipped YAMLs from this directory (e.g. those of the "
+                    "commit a baseline build was made at: git show COMMIT:config/rover_indoor.yaml > DIR/...)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     a = ap.parse_args(argv)
     if a.command == "build":

@@ -1,0 +1,243 @@
+// decision revisit (core/decision_rule.h, core/held_candidates.h): the revisit, not the single
+// candidate, is the unit of decision. After a long unclosed stretch the first true candidates
+// of a revisit fail the metric test alone; held together as a hypothesis they are released as
+// a group. A row of look-alikes that contradicts accepted loops, or that fits the prior worse
+// than a rival hypothesis of the same revisit, stays out.
+#include "rover_loop_fusion/core/verifier.h"
+#include "rover_loop_fusion/sim/scene.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <string>
+#include <vector>
+
+using namespace rover_loop_fusion;
+using core::LoopDecision;
+using core::Verdict;
+using core::Verifier;
+
+namespace {
+
+/// Two laps of a 120 m block with enough yaw drift that the true candidates of lap 2 score
+/// above the metric threshold alone (metric accepts none of them).
+sim::LapsOptions drifting() {
+  sim::LapsOptions o;
+  o.laps = 2;
+  o.width = 40.0;
+  o.height = 20.0;
+  o.seed = 7;
+  o.sigma_t = 0.01;
+  o.sigma_yaw = 0.005;
+  o.true_every = 3;
+  o.false_every = 0;
+  return o;
+}
+
+core::VerifierConfig config(core::Decision decision) {
+  core::VerifierConfig c;
+  c.decision = decision;
+  c.time_budget_ms = 0;  // verdicts must not depend on the machine's load
+  return c;
+}
+
+struct Outcome {
+  int true_accepted = 0, false_accepted = 0, true_rejected = 0, false_rejected = 0;
+  int released = 0, dropped = 0;
+  std::vector<LoopDecision> decisions;
+  std::vector<Verdict> verdicts;
+  double ate = 0.0;
+};
+
+bool isFalse(const core::LoopCandidate& c, const std::vector<core::LoopCandidate>& lookalikes) {
+  return std::any_of(lookalikes.begin(), lookalikes.end(), [&](const core::LoopCandidate& l) {
+    return l.query_index == c.query_index && l.match_index == c.match_index;
+  });
+}
+
+/// The sequential protocol of a host: every keyframe, then its candidates (the scene's true
+/// ones and `lookalikes`, by query); accepted ones committed; later decisions collected.
+Outcome run(const core::VerifierConfig& cfg, const sim::Scene& s, const std::vector<core::LoopCandidate>& lookalikes = {},
+        Verifier* out = nullptr) {
+  Verifier local(cfg);
+  Verifier& v = out ? *out : local;
+  EXPECT_TRUE(v.configError().empty()) << v.configError();
+  std::vector<core::LoopCandidate> all;
+  for (const sim::SimCandidate& c : s.candidates)
+    if (c.is_true) all.push_back(c.candidate);
+  all.insert(all.end(), lookalikes.begin(), lookalikes.end());
+  std::stable_sort(all.begin(), all.end(), [](const core::LoopCandidate& a, const core::LoopCandidate& b) {
+    return a.query_index < b.query_index;
+  });
+  Outcome r;
+  auto collect = [&]() {
+    for (const LoopDecision& d : v.takeDecisions()) {
+      const bool f = isFalse(d.candidate, lookalikes);
+      if (d.kind == LoopDecision::Kind::kRelease) {
+        ++r.released;
+        ++(f ? r.false_accepted : r.true_accepted);
+      } else if (d.kind == LoopDecision::Kind::kDrop) {
+        ++r.dropped;
+        ++(f ? r.false_rejected : r.true_rejected);
+      }
+      r.decisions.push_back(d);
+    }
+  };
+  size_t next = 0;
+  for (const sim::SimKeyframe& kf : s.keyframes) {
+    EXPECT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
+    collect();
+    for (; next < all.size() && all[next].query_index == kf.index; ++next) {
+      const core::LoopCandidate& c = all[next];
+      const Verdict vd = v.verify(c);
+      r.verdicts.push_back(vd);
+      const bool f = isFalse(c, lookalikes);
+      if (vd.accepted) {
+        EXPECT_TRUE(v.commit(c).ok);
+        ++(f ? r.false_accepted : r.true_accepted);
+      } else if (!vd.deferred) {
+        ++(f ? r.false_rejected : r.true_rejected);
+      }
+      collect();
+    }
+  }
+  std::vector<core::Pose> est, truth;
+  for (const core::TrajectoryPoint& p : v.trajectory()) est.push_back(p.estimate);
+  for (size_t i = 0; i < est.size(); ++i) truth.push_back(s.keyframes[i].truth);
+  r.ate = sim::ate(est, truth);
+  return r;
+}
+
+/// A row of look-alikes at the first true candidates of lap 2, each one keyframe before its
+/// true candidate (so the row is always one member ahead): their matches moved `shift`
+/// keyframes along the track, the relative pose kept (PnP on a place that looks the same).
+std::vector<core::LoopCandidate> lookalikeRow(const sim::Scene& s, int row, int shift) {
+  std::vector<core::LoopCandidate> out;
+  for (const sim::SimCandidate& c : s.candidates) {
+    if (!c.is_true || static_cast<int>(out.size()) >= row) continue;
+    core::LoopCandidate l = c.candidate;
+    l.match_index += shift;
+    l.query_index -= 1;  // one candidate per query keyframe, as loop_fusion reports them
+    out.push_back(l);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(RevisitRule, ReleasesTheRevisitThatTheMetricTestRejectsAloneAfterDrift) {
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  const Outcome metric = run(config(core::Decision::kMetric), s);
+  const Outcome revisit = run(config(core::Decision::kRevisit), s);
+  ASSERT_GT(metric.true_rejected, 0) << "the scene must drift enough that the metric test alone rejects true loops";
+  EXPECT_GT(revisit.released, 0) << "held members released as a group";
+  EXPECT_GT(revisit.true_accepted, metric.true_accepted);
+  EXPECT_EQ(revisit.false_accepted, 0);
+  EXPECT_LT(revisit.ate, metric.ate) << "the released revisit corrects the map";
+  for (const LoopDecision& d : revisit.decisions)
+    if (d.kind == LoopDecision::Kind::kRelease)
+      EXPECT_NE(d.verdict.detail.find("revisit hypothesis"), std::string::npos) << d.verdict.detail;
+}
+
+TEST(RevisitRule, DecidesNothingDifferentlyWhereTheMetricTestAcceptsEverything) {
+  sim::LapsOptions o = drifting();
+  o.sigma_yaw = 0.003;  // less drift: every true candidate passes alone
+  o.seed = 5;
+  const sim::Scene s = sim::makeLapsScene(o);
+  const Outcome metric = run(config(core::Decision::kMetric), s);
+  const Outcome revisit = run(config(core::Decision::kRevisit), s);
+  ASSERT_EQ(metric.true_rejected, 0);
+  EXPECT_EQ(revisit.true_accepted, metric.true_accepted);
+  EXPECT_EQ(revisit.released, 0) << "the fast path: nothing held";
+}
+
+TEST(RevisitRule, ALookAlikeRowLosesToTheTrueRevisitOfItsStretch) {
+  // The row reaches revisit_support first; the true hypothesis of the same stretch fits the
+  // prior better and blocks it.
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  const std::vector<core::LoopCandidate> row = lookalikeRow(s, 6, 3);  // 1.5 m along the track
+  const Outcome r = run(config(core::Decision::kRevisit), s, row);
+  int row_held = 0;
+  for (const Verdict& vd : r.verdicts)
+    if (vd.deferred && isFalse(core::LoopCandidate{vd.query_index, vd.match_index}, row)) ++row_held;
+  ASSERT_GE(row_held, 3) << "the row must be held (a hypothesis) for the test to mean anything";
+  EXPECT_EQ(r.false_accepted, 0);
+  EXPECT_GT(r.true_accepted, 0);
+  EXPECT_GT(r.false_rejected, 0);
+}
+
+TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
+  // The true revisit is in the graph already (committed as accepted loops); a row of
+  // look-alikes 1.5 m along the track of the same stretch arrives later. Held (a tiny metric
+  // threshold, revisit_reject_probability near 1), it must not be released: it contradicts the
+  // accepted loops.
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.revisit_reject_probability = 1.0 - 1e-12;
+  cfg.threshold = 0.01;  // no member passes the fast path: the row is held and judged
+  Verifier v(cfg);
+  std::vector<core::LoopCandidate> trues;
+  for (const sim::SimCandidate& c : s.candidates)
+    if (c.is_true && trues.size() < 12) trues.push_back(c.candidate);
+  // The look-alikes: the last true queries of that stretch, matched 3 keyframes off.
+  std::vector<core::LoopCandidate> row;
+  for (size_t i = 6; i < trues.size(); ++i) {
+    core::LoopCandidate l = trues[i];
+    l.match_index += 3;
+    l.query_index += 1;
+    row.push_back(l);
+  }
+  trues.resize(6);
+  size_t next = 0, held = 0;
+  std::vector<LoopDecision> decisions;
+  for (const sim::SimKeyframe& kf : s.keyframes) {
+    ASSERT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
+    for (const core::LoopCandidate& t : trues)
+      if (t.query_index == kf.index) ASSERT_TRUE(v.commit(t).ok);
+    for (; next < row.size() && row[next].query_index == kf.index; ++next) {
+      const Verdict vd = v.verify(row[next]);
+      EXPECT_FALSE(vd.accepted) << vd.detail;
+      if (vd.deferred) ++held;
+    }
+    for (const LoopDecision& d : v.takeDecisions()) decisions.push_back(d);
+  }
+  ASSERT_GE(held, 3u) << "the row must be held for the test to mean anything";
+  bool contradicted = false;
+  for (const LoopDecision& d : decisions) {
+    EXPECT_NE(d.kind, LoopDecision::Kind::kRelease) << d.verdict.detail;
+    if (d.verdict.detail.find("contradict accepted loops") != std::string::npos) contradicted = true;
+  }
+  EXPECT_TRUE(contradicted);
+  EXPECT_EQ(v.heldCount(), 0u);
+}
+
+TEST(RevisitRule, NothingIsReleasedWhileThePriorIsWeakerThanRevisitMaxSigma) {
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.revisit_max_sigma = 0.01;
+  const Outcome r = run(cfg, s);
+  EXPECT_EQ(r.released, 0);
+  bool said = false;
+  for (const LoopDecision& d : r.decisions)
+    if (d.verdict.detail.find("revisit_max_sigma") != std::string::npos) said = true;
+  EXPECT_TRUE(said);
+}
+
+TEST(RevisitRule, AHeldCandidateWithoutItsRevisitIsDroppedAfterRevisitWindow) {
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.revisit_support = 100;  // never enough members
+  cfg.revisit_window = 10;
+  Verifier v(cfg);
+  const Outcome r = run(cfg, s, {}, &v);
+  EXPECT_EQ(r.released, 0);
+  EXPECT_GT(r.dropped, 0);
+  const int deferred = static_cast<int>(std::count_if(r.verdicts.begin(), r.verdicts.end(),
+                                                      [](const Verdict& vd) { return vd.deferred; }));
+  EXPECT_EQ(r.dropped + static_cast<int>(v.heldCount()), deferred) << "each held candidate dropped once, or still held";
+  EXPECT_LE(v.heldCount(), 10u) << "only those of the last revisit_window keyframes are still held";
+  for (const LoopDecision& d : r.decisions) {
+    EXPECT_EQ(d.verdict.reason, core::Reason::kUnconfirmed);
+    EXPECT_NE(d.verdict.detail.find("revisit_window"), std::string::npos) << d.verdict.detail;
+  }
+}
