@@ -15,7 +15,9 @@
 // `rover_replay --help` lists every parameter with its unit, range and default.
 //
 // Protocols:
-//   sequential  commit what the verifier accepts (what the product does);
+//   sequential  commit what the verifier accepts (what the product does); a verdict says what
+//               was committed: an accepted loop whose commit is refused (the same loop again)
+//               is invalid_input, as the hosts report it (core::rejectRefusedCommit);
 //   oracle      commit only candidates labelled true (scores every candidate against the
 //               graph a perfect verifier would have built: for ranking metrics, AP / MR);
 //   none        commit nothing (every candidate scored against odometry alone).
@@ -185,7 +187,7 @@ int main(int argc, char** argv) {
 
   core::Verifier verifier(cfg);
   core::KeyframeGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
-  int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0;
+  int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0, oracle_refused = 0;
   size_t verified = 0;
   double verify_ms = 0.0;
   std::vector<double> stamps;
@@ -231,11 +233,18 @@ int main(int argc, char** argv) {
                      x->score, x->threshold, x->window_size, x->iterations, x->elapsed_ms);
       std::fprintf(trials_csv, "\n");
     }
-    const core::Verdict v = verifier.verify(c);
+    core::Verdict v = verifier.verify(c);
     ++verified;
     verify_ms += v.elapsed_ms;
-    const bool commit = protocol == "sequential" ? v.accepted : protocol == "oracle" ? sc.label == 1 : false;
-    if (commit) verifier.commit(c);
+    if (protocol == "sequential" && v.accepted) {
+      // What the product does (VerifierHost::decide): a loop whose commit is refused (the same
+      // loop again) is not in the graph, and its verdict says so.
+      core::rejectRefusedCommit(&v, verifier.commit(c));
+    } else if (protocol == "oracle" && sc.label == 1) {
+      // The oracle's graph: every true loop once (a repeated one is refused; the verdict is
+      // verify()'s, the ranking protocol's score).
+      if (!verifier.commit(c)) ++oracle_refused;
+    }
     accept_all.addLoop(c);
     Row row;
     row.verdict = v;
@@ -332,6 +341,8 @@ int main(int argc, char** argv) {
   }
   std::printf("rover_replay: %zu keyframes (%d refused), %zu candidates, protocol %s, threshold %.2f m\n",
               stamps.size(), refused_keyframes, verified, protocol.c_str(), cfg.threshold);
+  if (oracle_refused > 0)
+    std::printf("rover_replay: %d true candidates not committed by the oracle (the same loop again)\n", oracle_refused);
   if (tp + fp + tn + fn > 0)
     std::printf("rover_replay: TP %d FP %d TN %d FN %d  precision %s recall %s\n", tp, fp, tn, fn,
                 sim::ratioText(tp, tp + fp).c_str(), sim::ratioText(tp, tp + fn).c_str());
