@@ -4,19 +4,25 @@ by the test with its own parameters (node_reliability.test starts none):
 
 - a repeated candidate (the same loop again), whose commit the verifier refuses: the node and
   rover_replay give it the same invalid_input verdict ("... refused to commit it"); neither
-  reports it accepted."""
+  reports it accepted;
+- queue_size: a value too small for a burst is raised with a warning, the verdict queue holds a
+  burst for a slow subscriber whatever queue_size says, and messages beyond the inbox are not
+  processed but every candidate gets a verdict (a keyframe beyond it is refused, saying why)."""
 import csv
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
+import time
 import unittest
 
 import rospy
+from rover_loop_fusion.srv import Optimize
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node  # noqa: E402
+from test_node_hardening import Node, Verdicts, keyframe, candidate, publishers, wait_until  # noqa: E402
 from roverlib import bag, bag_replay, scenario  # noqa: E402
 
 PKG = "rover_loop_fusion"
@@ -97,6 +103,65 @@ class NodeReliability(unittest.TestCase):
         self.assertEqual([v.detail.split("; but ")[-1] for v in verdicts if "refused to commit" in v.detail],
                          [r["detail"].split("; but ")[-1] for r in refused])
 
+    def test_a_small_queue_size_is_raised_with_a_warning_and_a_slow_subscriber_gets_every_verdict(self):
+        # issue 22 item 6: queue_size 1 was accepted and also set the verdict queue: with a slow
+        # subscriber, 2 of 60 verdicts arrived and nothing said so.
+        n = 60
+        node = Node("small_queue", {"queue_size": 1, "candidate_timeout": 1.0, "optimize_period": 0.0})
+        try:
+            verdicts = Verdicts(node.name, stall=3.0)
+            self.assertTrue(verdicts.connected())
+            _, cand = publishers(node.name)
+            for i in range(n):
+                cand.publish(candidate(1e6 + i, 1.0))
+            self.assertTrue(verdicts.wait(n, 60.0), f"{len(verdicts.msgs)} of {n} verdicts arrived")
+            self.assertTrue(all("candidate_timeout" in v.detail for v in verdicts.msgs))
+            self.assertIn("/small_queue/queue_size=1 cannot hold a burst of messages", node.output())
+            self.assertIn("raised to 1000", node.output())
+        finally:
+            node.stop()
+
+    def test_messages_beyond_the_inbox_are_not_processed_but_every_candidate_gets_a_verdict(self):
+        # 300 keyframes on a line, then 2500 candidates claiming that its far ends meet, with the
+        # gate, the time budget and the condensed trial off (full-window trials, ~10 ms each):
+        # the inbox (queue_size 1000) fills, the candidates beyond it get an invalid_input
+        # verdict saying so (before: none, only a ROS_ERROR count). 1500 keyframes sent while
+        # it is full are refused with the reason, and a candidate naming the last one says it.
+        n, k = 2500, 300
+        node = Node("inbox", {"queue_size": 1000, "candidate_timeout": 600.0, "optimize_period": 0.0,
+                              "rover/max_innovation": 0.0, "rover/time_budget_ms": 0.0,
+                              "rover/max_iterations": 200, "rover/condense_min_window": 0})
+        try:
+            verdicts = Verdicts(node.name)
+            self.assertTrue(verdicts.connected())
+            kf, cand = publishers(node.name)
+            for i in range(k):
+                kf.publish(keyframe(1.0 + i, 0.5 * i))
+            optimize = rospy.ServiceProxy(node.name + "/optimize", Optimize)
+            self.assertTrue(wait_until(lambda: optimize().keyframe_messages == k, 60.0))
+            for i in range(n):
+                cand.publish(candidate(float(k), 1.0 + i % 150))
+            for i in range(1500):
+                kf.publish(keyframe(k + 1.0 + i, 0.5 * (k + i)))
+            self.assertTrue(verdicts.wait(n, 300.0), f"{len(verdicts.msgs)} of {n} verdicts arrived")
+            self.assertTrue(wait_until(lambda: optimize().keyframe_messages == k + 1500, 60.0))
+            full = [v for v in verdicts.msgs if "inbox was full" in v.detail]
+            self.assertGreater(len(full), 0, "the inbox never filled: the test proves nothing")
+            bad = [v for v in full if not (v.reason == "invalid_input" and not v.accepted and v.query_index == k - 1
+                                           and "not verified" in v.detail and "queue_size=1000" in v.detail)]
+            self.assertEqual(bad, [])
+            # a keyframe that arrived when the inbox was full: refused, and a loop into it says why
+            dropped = re.search(r"keyframe message (\d+) \(stamp (\d+\.\d+)\) refused: not processed", node.output())
+            self.assertIsNotNone(dropped, "no keyframe arrived when the inbox was full")
+            cand.publish(candidate(float(dropped.group(2)), 1.0))
+            self.assertTrue(verdicts.wait(n + 1, 60.0))
+            time.sleep(0.5)
+            self.assertEqual(len(verdicts.msgs), n + 1)
+            last = verdicts.msgs[-1]
+            self.assertEqual(last.reason, "invalid_input")
+            self.assertIn("was refused (not processed: it arrived when the node's inbox was full", last.detail)
+        finally:
+            node.stop()
 
 if __name__ == "__main__":
     import rostest
