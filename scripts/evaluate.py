@@ -24,7 +24,8 @@ accepted one revoked: columns final, decision) is read as each candidate's final
 rover_replay writes it. Refused, with one line "evaluate.py: error: FILE[:LINE]: what" and exit
 status 2 (nothing is scored):
 - malformed input: an empty or truncated verdict log, a label or index that is not an integer,
-  a missing column, a --run directory without ground truth;
+  a missing column, a --run directory without ground truth, a TUM ground truth or trajectory
+  with a value that is not finite or a repeated stamp;
 - a score that is not a number, or a negative one (a score is an RMSE or a squared distance:
   -1e308 would rank first); "nan" and "inf" (no score) rank last;
 - candidates of the label file without a verdict (lost verdicts: a run that stopped early, a
@@ -209,6 +210,40 @@ def read_labels(path):
     return out
 
 
+TUM_FIELDS = ("stamp", "x", "y", "z", "qx", "qy", "qz", "qw")
+
+
+def check_tum(path, what):
+    """Refuses (InputError, FILE:LINE) a TUM trajectory with a line that is not 8 numbers, a
+    value that is not finite or a stamp that repeats: the ATE against it would be NaN, fail in
+    the alignment ("SVD did not converge"), or pair a pose with the wrong one."""
+    seen = {}
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            lines = list(enumerate(f, 1))
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: cannot read the {what}: {getattr(e, 'strerror', None) or e}")
+    for n, line in lines:
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        fields = text.replace(",", " ").split()
+        if len(fields) != len(TUM_FIELDS):
+            raise InputError(f"{path}:{n}: {len(fields)} values, a line of a TUM {what} has 8 "
+                             f"({' '.join(TUM_FIELDS)})")
+        for name, value in zip(TUM_FIELDS, fields):
+            try:
+                number = float(value)
+            except ValueError:
+                raise InputError(f"{path}:{n}: {name} '{value}' is not a number")
+            if not math.isfinite(number):
+                raise InputError(f"{path}:{n}: {name} '{value}' is not finite")
+        stamp = float(fields[0])
+        if stamp in seen:
+            raise InputError(f"{path}:{n}: stamp {fields[0]} repeats line {seen[stamp]} (two poses at one time)")
+        seen[stamp] = n
+
+
 def strict_json(value):
     """value with every NaN or infinite float as None: metrics.json is JSON (RFC 8259 has no NaN)."""
     if isinstance(value, dict):
@@ -227,6 +262,12 @@ def evaluate(verdicts, labels, out=None, groundtruth=None, trajectories=(), alig
     if run and not os.path.exists(os.path.join(run, "groundtruth.tum")):
         raise InputError(f"{run}: no groundtruth.tum: --run needs an output directory of rover_replay on a "
                          f"scenario with ground truth (use --verdicts for the verdicts alone)")
+    if run:
+        check_tum(os.path.join(run, "groundtruth.tum"), "ground truth")
+    elif groundtruth:
+        check_tum(groundtruth, "ground truth")
+        for _, path in trajectories:
+            check_tum(path, "trajectory")
     candidates = final_verdicts(verdicts, read_verdict_rows(verdicts))
     label_rows = read_labels(labels)
     check_correspondence(verdicts, candidates, labels, label_rows)

@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <sstream>
 #include <vector>
 
@@ -26,6 +27,8 @@ const size_t kRefusedKept = 10000;  // refused keyframe messages remembered to e
 /// keyframes/s and a 200 ms time budget: 80 messages; loop_fusion's optimisation of a long run
 /// on the main thread: seconds). A smaller ~queue_size is raised to it with a ROS_WARN.
 const int kMinQueueSize = 1000;
+/// The largest keyframe number a candidate can name (loop_fusion's indices are int).
+const int64_t kMaxKeyframeNumber = std::numeric_limits<int32_t>::max();
 
 /// Nearest entry of `m` (keyed by stamp [ns]) within `tol` of `ns`; end() if none.
 template <typename Map>
@@ -380,6 +383,12 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
     *why = who + "index " + std::to_string(index) + " is negative (-1 names a keyframe by its stamp)";
     return Resolution::kInvalid;
   }
+  if (index > kMaxKeyframeNumber) {
+    // No keyframe can ever have it: invalid now, not after candidate_timeout.
+    *why = who + "index " + std::to_string(index) + " cannot name a keyframe (keyframes are numbered in arrival "
+           "order, at most " + std::to_string(kMaxKeyframeNumber) + " as loop_fusion's int indices)";
+    return Resolution::kInvalid;
+  }
   if (index >= 0) {
     if (stamp_of_.count(index)) {
       *found = index;
@@ -539,6 +548,9 @@ void VerifierNode::applyDecisions() {
 }
 
 void VerifierNode::reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why, bool log) {
+  // A keyframe named by number that did not resolve: the verdict names the number given.
+  if (query < 0 && msg.query_index >= 0) query = msg.query_index;
+  if (match < 0 && msg.match_index >= 0) match = msg.match_index;
   core::LoopCandidate c;
   c.query_index = query;
   c.match_index = match;

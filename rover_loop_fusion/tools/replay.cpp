@@ -184,6 +184,8 @@ int main(int argc, char** argv) {
   for (size_t i = 0; i < s.candidates.size(); ++i)
     by_query.emplace(s.candidates[i].candidate.query_index, i);
   std::map<int64_t, double> stamp_of;
+  std::map<int64_t, int> upcoming;  // keyframe indices still to come (how often)
+  for (const sim::ScenarioKeyframe& k : s.keyframes) ++upcoming[k.index];
 
   core::Verifier verifier(cfg);
   core::KeyframeGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
@@ -233,7 +235,14 @@ int main(int argc, char** argv) {
                      x->score, x->threshold, x->window_size, x->iterations, x->elapsed_ms);
       std::fprintf(trials_csv, "\n");
     }
-    core::Verdict v = verifier.verify(c);
+    // A match that has not arrived but comes later: the query is older than its match (the
+    // verifier would only know "unknown match keyframe"; the node says the same as this).
+    core::Verdict v = !stamp_of.count(c.match_index) && upcoming.count(c.match_index)
+                          ? core::Verdict::Reject(core::Reason::kInvalidInput, c,
+                                                  "match keyframe " + std::to_string(c.match_index) +
+                                                      " comes after query keyframe " + std::to_string(c.query_index) +
+                                                      " in keyframes.csv: the match must be the older keyframe")
+                          : verifier.verify(c);
     ++verified;
     verify_ms += v.elapsed_ms;
     if (protocol == "sequential" && v.accepted) {
@@ -275,6 +284,7 @@ int main(int argc, char** argv) {
   };
   for (const sim::ScenarioKeyframe& k : s.keyframes) {
     ++handled_keyframes;
+    if (--upcoming[k.index] == 0) upcoming.erase(k.index);
     const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     if (!st) {

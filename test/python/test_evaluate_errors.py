@@ -202,3 +202,27 @@ def test_metrics_json_is_strict_json(tmp_path, capsys):
     assert m["ap"] is None and m["mr"] is None and m["precision"] is None
     assert m["recall"] == 0.0 and m["fn"] == 2
     assert "AP -" in run.out and "precision -" in run.out
+
+
+@pytest.mark.parametrize("bad, why", [("nan", "x 'nan' is not finite"), ("dup", "stamp 2 repeats line 3"),
+                                      ("short", "7 values, a line of a TUM ground truth has 8 (stamp x y z qx qy qz qw)")])
+def test_ground_truth_with_nan_or_repeated_stamps_is_refused(tmp_path, capsys, good_labels, bad, why):
+    # issue 22 item 8: ground truth with NaN or duplicate rows was accepted ("SVD did not converge",
+    # or an ATE against the wrong pose).
+    rows = [f"{i} {i}.0 0 0 0 0 0 1" for i in range(1, 6)]
+    if bad == "nan":
+        rows[1] = "2 nan 0 0 0 0 0 1"
+    elif bad == "dup":
+        rows.insert(2, rows[1])
+    else:
+        rows[1] = "2 2.0 0 0 0 0 1"
+    gt = tmp_path / "gt.tum"
+    gt.write_text("# t x y z qx qy qz qw\n" + "\n".join(rows) + "\n")
+    est = tmp_path / "est.tum"
+    est.write_text("\n".join(f"{i} {i}.0 0 0.1 0 0 0 1" for i in range(1, 6)) + "\n")
+    v = verdicts(tmp_path, [(10, 1, 1, 0.1), (20, 2, 0, 0.5)])
+    status, err = run(capsys, "--verdicts", v, "--labels", good_labels, "--groundtruth", str(gt),
+                      "--trajectory", f"est={est}", "--align", "none")
+    assert (status, len(err)) == (2, 1), err
+    line = 4 if bad == "dup" else 3
+    assert err[0] == f"evaluate.py: error: {gt}:{line}: {why}" + (" (two poses at one time)" if bad == "dup" else "")

@@ -7,7 +7,9 @@ by the test with its own parameters (node_reliability.test starts none):
   reports it accepted;
 - queue_size: a value too small for a burst is raised with a warning, the verdict queue holds a
   burst for a slow subscriber whatever queue_size says, and messages beyond the inbox are not
-  processed but every candidate gets a verdict (a keyframe beyond it is refused, saying why)."""
+  processed but every candidate gets a verdict (a keyframe beyond it is refused, saying why);
+- an index no keyframe can have (2^62) is invalid at once, and the verdict names it; a query older
+  than its match is reported as such."""
 import csv
 import math
 import os
@@ -162,6 +164,33 @@ class NodeReliability(unittest.TestCase):
             self.assertIn("was refused (not processed: it arrived when the node's inbox was full", last.detail)
         finally:
             node.stop()
+    def test_an_impossible_index_is_invalid_at_once_and_a_query_older_than_its_match_is_named(self):
+        # issue 22 item 8: a 2^62 index waited the whole candidate_timeout and was reported with
+        # query_index -1.
+        node = Node("indices", {"candidate_timeout": 60.0, "optimize_period": 0.0})
+        try:
+            verdicts = Verdicts(node.name)
+            self.assertTrue(verdicts.connected())
+            kf, cand = publishers(node.name)
+            kf.publish(keyframe(1.0, 0.0))
+            kf.publish(keyframe(2.0, 0.5))
+            cand.publish(candidate(2.0, 1.0, query_index=2**62, match_index=0, dx=0.5))
+            cand.publish(candidate(1.0, 2.0, dx=-0.5))  # both arrived, the query is the older
+            cand.publish(candidate(3.0, 4.0, dx=-0.5))  # neither yet; then only the query comes
+            kf.publish(keyframe(3.0, 1.0))
+            self.assertTrue(verdicts.wait(3, 20.0), f"{len(verdicts.msgs)} of 3 verdicts within 20 s "
+                                                    f"(candidate_timeout 60 s)")
+            huge, older, later = verdicts.msgs
+            self.assertEqual((huge.reason, huge.query_index, huge.match_index), ("invalid_input", 2**62, 0))
+            self.assertIn("index 4611686018427387904 cannot name a keyframe", huge.detail)
+            for v in (older, later):
+                self.assertEqual(v.reason, "invalid_input")
+                self.assertNotIn("unknown", v.detail)
+            self.assertIn("newer than query", older.detail)
+            self.assertIn("the match must be the older keyframe", later.detail)
+        finally:
+            node.stop()
+
 
 if __name__ == "__main__":
     import rostest
