@@ -30,8 +30,9 @@ status 2 (nothing is scored):
   -1e308 would rank first); "nan" and "inf" (no score) rank last;
 - candidates of the label file without a verdict (lost verdicts: a run that stopped early, a
   full disk), verdicts for candidates the label file does not have (another run's log, a
-  repeated row, a log appended to twice), held candidates without a final verdict, and later
-  decisions (release, drop, revoke) of a candidate no row held or accepted.
+  repeated row, a log appended to twice).
+A candidate still held when the log ends (a host that ended without its final verdict) is scored
+as not accepted, with a warning on stderr.
 Label -1 (unknown) candidates need their verdict too; they are not scored. metrics.json is
 strict JSON: an undefined figure (AP without a false candidate, precision of no accepted loop)
 is null. A UTF-8 byte-order mark is ignored."""
@@ -135,7 +136,8 @@ def final_verdicts(path, rows):
     (release or drop of a held candidate, revoke of an accepted loop) replaces accepted, reason
     and detail of the candidate's row, which keeps its score (as rover_replay's one row per
     candidate has it). A later-decision row without such an earlier row is the candidate's only
-    row (rover_replay's form). A held candidate that never got its final verdict is refused."""
+    row (rover_replay's form). A candidate still held when the log ends is dropped, as
+    rover_replay drops it at the end of a run (not accepted), with a warning on stderr."""
     out = []
     open_ = {}  # (query, match) -> {"held": index, "accepted": index} of out
     for n, r in rows:
@@ -155,12 +157,16 @@ def final_verdicts(path, rows):
             slots["held"] = len(out) - 1
         elif r["accepted"] == "1":
             slots["accepted"] = len(out) - 1
-    undecided = [(n, r) for n, r in out if _held(r)]
+    undecided = [i for i, (_, r) in enumerate(out) if _held(r)]
     if undecided:
-        n, r = undecided[0]
-        raise InputError(f"{path}:{n}: {len(undecided)} held candidate(s) without a final verdict (the first: loop "
-                         f"{r['query_index']} -> {r['match_index']}): the log ends before the verifier decided "
-                         f"(a stopped node, lost rows); not scored")
+        n, r = out[undecided[0]]
+        print(f"evaluate.py: warning: {path}:{n}: {len(undecided)} candidate(s) still held when the log ends (the "
+              f"first: loop {r['query_index']} -> {r['match_index']}; a host that ended without their final verdict: "
+              f"loop_fusion's abort, a killed node): scored as not accepted, as the run never used them",
+              file=sys.stderr)
+        for i in undecided:
+            n, r = out[i]
+            out[i] = (n, dict(r, accepted="0", reason="unconfirmed", final="1", decision="drop"))
     return out
 
 

@@ -53,6 +53,8 @@ class VerdictOutput {
 
   size_t published() const { return count_; }
   const VerdictLog& log() const { return log_; }
+  /// Waits up to timeout_s for the CSV rows queued so far to be written; the rows still waiting.
+  size_t flushLog(double timeout_s) { return log_.isOpen() ? log_.flush(timeout_s) : 0; }
 
  private:
   Options options_;

@@ -157,7 +157,9 @@ int VerifierNode::spin(const std::atomic<bool>& stop) {
   stop_ = &stop;
   ros::CallbackQueue* queue = ros::getGlobalCallbackQueue();
   while (ros::ok() && !stop && exit_code_ == 0) queue->callAvailable(ros::WallDuration(0.1));
-  if (exit_code_ == 0) finish();
+  // Also when the master restarted (exit status 2): the verdicts cannot reach a subscriber
+  // then, but the CSV log gets every candidate's final verdict.
+  finish();
   return exit_code_;
 }
 
@@ -482,7 +484,14 @@ void VerifierNode::expire() {
 // ---- verdicts --------------------------------------------------------------------------------
 
 void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match) {
-  const core::LoopCandidate c = fromCandidateMsg(msg, query, match);
+  // The match keyframe's VIO rotation, for a relative_yaw the message leaves NaN (loop_fusion's
+  // convention: the difference of world yaws; the graph's keyframes are anchored by a yaw at
+  // most, which leaves that difference as it is).
+  core::Pose match_vio;
+  size_t match_pos = 0;
+  if (!graph_->find(match, &match_pos) || !graph_->vioAt(match_pos, &match_vio))
+    match_vio.q = Eigen::Quaterniond(std::nan(""), 0.0, 0.0, 0.0);  // unknown: the yaw stays NaN (invalid)
+  const core::LoopCandidate c = fromCandidateMsg(msg, query, match, match_vio.q);
   core::Verdict v = host_.decide(c);
   if (v.accepted) useLoop(c, &v);
   v.query_index = query;

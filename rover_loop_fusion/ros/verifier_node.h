@@ -46,7 +46,8 @@
 //
 // Master watchdog: the node checks the ROS master every second; if it restarted (new
 // /run_id), the node's registrations are gone, so it exits with status 2 and a ROS_FATAL
-// saying so; verifier.launch respawns it.
+// saying so, after giving every candidate it has not decided its final verdict as at a
+// shutdown (in the CSV log; nobody can receive the topic); verifier.launch respawns it.
 #pragma once
 
 #include "rover_loop_fusion/LoopCandidate.h"
@@ -94,9 +95,9 @@ class VerifierNode {
   /// false with *error naming the parameter when the node cannot run.
   bool start(std::string* error);
 
-  /// Runs the main thread's callbacks until ros::ok() ends or `stop` is set (a signal
-  /// handler's flag), then finish(). Returns the process's exit status: 0, or 2 when the
-  /// master restarted.
+  /// Runs the main thread's callbacks until ros::ok() ends, `stop` is set (a signal handler's
+  /// flag) or the master restarted, then finish(). Returns the process's exit status: 0, or 2
+  /// when the master restarted.
   int spin(const std::atomic<bool>& stop);
 
   /// Stops taking messages and gives every candidate not decided yet (waiting, or still in

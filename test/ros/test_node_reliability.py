@@ -9,11 +9,16 @@ by the test with its own parameters (node_reliability.test starts none):
   burst for a slow subscriber whatever queue_size says, and messages beyond the inbox are not
   processed but every candidate gets a verdict (a keyframe beyond it is refused, saying why);
 - an index no keyframe can have (2^62) is invalid at once, and the verdict names it; a query older
-  than its match is reported as such."""
+  than its match is reported as such;
+- a run that ends with candidates undecided (the master restarted: exit status 2) still gives each
+  its final verdict in the CSV log; a NaN relative_yaw is derived in loop_fusion's convention
+  (the difference of world yaws), which chi2 accepts on a tilted body."""
 import csv
 import math
 import os
 import re
+import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -24,7 +29,8 @@ import rospy
 from rover_loop_fusion.srv import Optimize
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node, Verdicts, keyframe, candidate, publishers, wait_until  # noqa: E402
+from test_node_hardening import Node, Verdicts, keyframe, candidate, publishers, wait_until, _is_up  # noqa: E402
+import rosgraph  # noqa: E402
 from roverlib import bag, bag_replay, scenario  # noqa: E402
 
 PKG = "rover_loop_fusion"
@@ -190,6 +196,94 @@ class NodeReliability(unittest.TestCase):
             self.assertIn("the match must be the older keyframe", later.detail)
         finally:
             node.stop()
+
+    def test_candidates_undecided_when_the_master_restarts_get_their_final_verdict_in_the_log(self):
+        # issue 22 item 9: a run that ended because the master restarted (exit status 2) gave the
+        # candidates still waiting or held no final verdict: the CSV log lacked them.
+        with socket.socket() as s:
+            s.bind(("localhost", 0))
+            port = s.getsockname()[1]
+        env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{port}")
+        masters = []
+        log = tempfile.NamedTemporaryFile(suffix=".csv", delete=False).name
+        os.unlink(log)
+
+        def start_master():
+            m = subprocess.Popen(["rosmaster", "--core", "-p", str(port)], env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            masters.append(m)
+            master = rosgraph.Master("/node_reliability", master_uri=env["ROS_MASTER_URI"])
+            self.assertTrue(wait_until(lambda: _is_up(master)), "rosmaster did not start")
+
+        node = None
+        try:
+            start_master()
+            subprocess.run(["rosparam", "set", "/restart/verdict_log", log], env=env, check=True)
+            subprocess.run(["rosparam", "set", "/restart/candidate_timeout", "600.0"], env=env, check=True)
+            node = Node("restart", env=env, wait=False)
+            self.assertTrue(wait_until(lambda: "candidates from" in node.output(), 60.0), node.output())
+            # one keyframe and one candidate waiting for a keyframe that does not come
+            subprocess.run(["rostopic", "pub", "-1", "/vins_estimator/keyframe_pose", "nav_msgs/Odometry",
+                            "{header: {stamp: {secs: 1}}, pose: {pose: {orientation: {w: 1.0}}}}"],
+                           env=env, check=True, stdout=subprocess.DEVNULL)
+            subprocess.run(["rostopic", "pub", "-1", "/loop_fusion/loop_candidates", "rover_loop_fusion/LoopCandidate",
+                            "{query_index: -1, match_index: -1, query_stamp: {secs: 50}, match_stamp: {secs: 1}, "
+                            "relative_pose: {orientation: {w: 1.0}}, inliers: 40}"],
+                           env=env, check=True, stdout=subprocess.DEVNULL)
+            self.assertTrue(wait_until(lambda: "1 keyframe" in _optimize_text(env), 30.0))
+            masters[0].terminate()
+            masters[0].wait()
+            self.assertTrue(wait_until(lambda: "unreachable" in node.output(), 30.0), node.output())
+            start_master()
+            self.assertEqual(node.wait_exit(60.0), 2, node.output())
+            with open(log) as f:
+                rows = [line for line in f if line.strip()]
+            self.assertEqual(len(rows), 2, "header + the waiting candidate's final verdict: " + "".join(rows))
+            self.assertIn("invalid_input", rows[1])
+            self.assertIn("not verified: the node was shut down", rows[1])
+        finally:
+            if node:
+                if node.proc.poll() is None:
+                    node.proc.kill()
+                    node.proc.wait()
+                os.unlink(node.log.name)
+            for m in masters:
+                if m.poll() is None:
+                    m.terminate()
+                    m.wait()
+            if os.path.exists(log):
+                os.unlink(log)
+
+    def test_a_nan_relative_yaw_is_derived_as_loop_fusions_relative_yaw(self):
+        # issue 22 item 9: a candidate message with relative_yaw NaN took the yaw of the relative
+        # rotation (the old convention); on a tilted body (EuRoC's IMU) an exact loop was then
+        # 9 deg off and chi2 rejected it (d2 48 > 18.5). loop_fusion's loop_info[7] is the
+        # difference of the keyframes' world yaws.
+        sys.path.insert(0, os.path.join(ROOT, "test", "python"))
+        from conftest import tilted_loop_scenario
+        s, _ = tilted_loop_scenario()
+        messages = bag.scenario_messages(s)
+        for _, topic, m in messages:
+            if topic == bag.CANDIDATE_TOPIC:
+                m.relative_yaw = float("nan")
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "nan_yaw.bag")
+            bag.write_messages(messages, path)
+            node = Node("nan_yaw", {"optimize_period": 0.0, "rover/decision": "chi2"})
+            try:
+                client = bag_replay.VerifierClient(node.name)
+                bag_replay.play(path, [client])
+            finally:
+                node.stop()
+        (v,) = client.verdicts
+        self.assertEqual(v.reason, "accepted", v.detail)
+        self.assertIn("innovation 0.000 m, 0.000 deg", v.detail)
+
+
+def _optimize_text(env):
+    """The message of the node /restart's ~optimize at the master of `env`."""
+    res = subprocess.run(["rosservice", "call", "/restart/optimize"], env=env, capture_output=True, text=True)
+    return res.stdout
 
 
 if __name__ == "__main__":
