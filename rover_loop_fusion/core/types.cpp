@@ -103,5 +103,12 @@ Verdict Verdict::Reject(Reason reason, const LoopCandidate& c, std::string detai
   return v;
 }
 
+void rejectRefusedCommit(Verdict* v, const Status& commit) {
+  if (commit.ok) return;
+  v->accepted = false;
+  v->reason = Reason::kInvalidInput;
+  v->detail += "; but the verifier refused to commit it: " + commit.message;
+}
+
 }  // namespace core
 }  // namespace rover_loop_fusion

@@ -182,6 +182,12 @@ struct Status {
   explicit operator bool() const { return ok; }
 };
 
+/// An accepted verdict whose commit the verifier refused (the same loop again: "already in the
+/// graph"): the loop is not in the graph, so the verdict becomes an invalid_input rejection
+/// that says why ("...; but the verifier refused to commit it: ..."). The hosts and rover_replay
+/// report a refused commit this way, so that a verdict says what was committed.
+void rejectRefusedCommit(Verdict* v, const Status& commit);
+
 /// The verifier's parameters. Every field is a row of the parameter table (core/parameters.h:
 /// its YAML name, unit, range and doc); adding a field means adding its row there.
 struct VerifierConfig {

@@ -85,14 +85,23 @@ LoopCandidate toCandidateMsg(const core::LoopCandidate& c, double query_stamp, d
   return m;
 }
 
-core::LoopCandidate fromCandidateMsg(const LoopCandidate& msg, int64_t query, int64_t match) {
+double loopYaw(const Eigen::Quaterniond& match_rotation, const Eigen::Quaterniond& relative) {
+  const double nm = match_rotation.norm(), nr = relative.norm();
+  if (!std::isfinite(nm) || !std::isfinite(nr) || nm < 1e-9 || nr < 1e-9) return std::nan("");
+  const Eigen::Quaterniond m = match_rotation.normalized();
+  const double d = yawOf(m * relative.normalized()) - yawOf(m);
+  return std::atan2(std::sin(d), std::cos(d));
+}
+
+core::LoopCandidate fromCandidateMsg(const LoopCandidate& msg, int64_t query, int64_t match,
+                                     const Eigen::Quaterniond& match_rotation) {
   core::LoopCandidate c;
   c.query_index = query;
   c.match_index = match;
   const geometry_msgs::Pose& p = msg.relative_pose;
   c.relative_t = Eigen::Vector3d(p.position.x, p.position.y, p.position.z);
   c.relative_q = Eigen::Quaterniond(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
-  c.relative_yaw = std::isnan(msg.relative_yaw) ? yawOf(c.relative_q) : msg.relative_yaw;
+  c.relative_yaw = std::isnan(msg.relative_yaw) ? loopYaw(match_rotation, c.relative_q) : msg.relative_yaw;
   c.inliers = msg.inliers;
   return c;
 }

@@ -39,9 +39,17 @@ geometry_msgs::PoseStamped toPoseStamped(const core::Pose& p, const ros::Time& s
 /// loop_fusion's indices).
 LoopCandidate toCandidateMsg(const core::LoopCandidate& c, double query_stamp, double match_stamp,
                              const std::string& frame_id);
-/// The core candidate of a message whose keyframes resolved to `query` and `match`; a NaN
-/// relative_yaw is taken from the relative rotation.
-core::LoopCandidate fromCandidateMsg(const LoopCandidate& msg, int64_t query, int64_t match);
+/// The core candidate of a message whose keyframes resolved to `query` and `match`. A NaN
+/// relative_yaw (unknown) is derived as loop_fusion computes loop_info[7], the difference of the
+/// keyframes' world yaws: loopYaw(match_rotation, relative rotation), match_rotation being the
+/// match keyframe's VIO rotation (not the yaw of the relative rotation, which differs from it
+/// on a tilted body).
+core::LoopCandidate fromCandidateMsg(const LoopCandidate& msg, int64_t query, int64_t match,
+                                     const Eigen::Quaterniond& match_rotation);
+
+/// loop_fusion's relative yaw of a loop [rad]: yaw(R_m R_rel) - yaw(R_m), wrapped to (-pi, pi];
+/// NaN if a quaternion cannot be normalised.
+double loopYaw(const Eigen::Quaterniond& match_rotation, const Eigen::Quaterniond& relative);
 
 /// What the core verdict does not know about the candidate.
 struct VerdictContext {

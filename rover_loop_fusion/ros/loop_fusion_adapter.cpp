@@ -15,8 +15,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <mutex>
 #include <map>
+#include <set>
 #include <unordered_map>
 #include <utility>
 
@@ -46,6 +48,39 @@ std::string join(const std::vector<std::string>& parts) {
   std::_Exit(EXIT_FAILURE);
 }
 
+// loop_fusion ends by std::terminate: its main returns with its threads still joinable (after
+// the 's' save and after Ctrl-C alike: exit status -6), so no destructor runs. The adapters that
+// verify register here; a terminate handler lets each finish() (the final verdicts of held
+// candidates, the CSV log flushed) before the previous handler (abort) runs.
+std::mutex g_live_mutex;
+std::set<LoopFusionAdapter*> g_live;
+std::terminate_handler g_previous_terminate = nullptr;
+std::once_flag g_terminate_installed;
+
+[[noreturn]] void finishOnTerminate() {
+  std::vector<LoopFusionAdapter*> live;
+  {
+    std::unique_lock<std::mutex> lock(g_live_mutex, std::try_to_lock);
+    if (lock.owns_lock()) live.assign(g_live.begin(), g_live.end());
+  }
+  for (LoopFusionAdapter* a : live) a->finish();
+  std::fflush(stdout);
+  std::fflush(stderr);
+  if (g_previous_terminate) g_previous_terminate();
+  std::abort();
+}
+
+void registerLive(LoopFusionAdapter* adapter) {
+  std::call_once(g_terminate_installed, [] { g_previous_terminate = std::set_terminate(finishOnTerminate); });
+  std::lock_guard<std::mutex> lock(g_live_mutex);
+  g_live.insert(adapter);
+}
+
+void unregisterLive(LoopFusionAdapter* adapter) {
+  std::lock_guard<std::mutex> lock(g_live_mutex);
+  g_live.erase(adapter);
+}
+
 /// A keyframe without a loop, as KeyFrame's constructor leaves it.
 void dropLoop(bool& has_loop, int& loop_index, LoopFusionAdapter::LoopInfo& loop_info) {
   has_loop = false;
@@ -56,7 +91,7 @@ void dropLoop(bool& has_loop, int& loop_index, LoopFusionAdapter::LoopInfo& loop
 }  // namespace
 
 struct LoopFusionAdapter::Impl {
-  enum class Mode { kUninitialized, kVerifying, kFallback, kFailed };
+  enum class Mode { kUninitialized, kVerifying, kFallback, kFailed, kFinished };
   struct KeyframeInfo {
     double stamp = 0.0;
     Eigen::Vector3d position = Eigen::Vector3d::Zero();  // VIO position as handed in
@@ -204,7 +239,44 @@ bool LoopFusionAdapter::Impl::start(bool use_imu, VerifierPtr injected, const st
 
 LoopFusionAdapter::LoopFusionAdapter() : impl_(new Impl) {}
 
-LoopFusionAdapter::~LoopFusionAdapter() = default;
+LoopFusionAdapter::~LoopFusionAdapter() {
+  unregisterLive(this);
+  finish();
+}
+
+void LoopFusionAdapter::finish() {
+  Impl& m = *impl_;
+  guarded("LoopFusionAdapter::finish (held candidates may lack their final verdict)", [&] {
+    std::lock_guard<std::mutex> lock(m.mutex);
+    if (m.mode != Impl::Mode::kVerifying) {
+      if (m.mode != Impl::Mode::kUninitialized) m.mode = Impl::Mode::kFinished;
+      return;
+    }
+    m.collectDecisions();  // what the verifier decided last
+    const size_t held = m.held.size();
+    for (const auto& h : m.held) {
+      core::LoopCandidate c = core::candidateFromLoopInfo(h.first.first, h.first.second, h.second.loop_info.data(),
+                                                          h.second.inliers);
+      VerdictContext ctx;
+      ctx.verifier = m.host->verifierType();
+      ctx.decision = core::toString(core::LoopDecision::Kind::kDrop);
+      ctx.inliers = h.second.inliers;
+      m.publish(core::Verdict::Reject(core::Reason::kUnconfirmed, c,
+                                      "still held when loop_fusion ended: not confirmed, never used"),
+                ctx);
+    }
+    m.held.clear();
+    m.failure = "loop_fusion ended (LoopFusionAdapter::finish)";
+    m.mode = Impl::Mode::kFinished;
+    if (held > 0)
+      ROS_INFO("[rover] loop_fusion ends: %zu candidates still held got their final verdict (unconfirmed, drop)",
+               held);
+    // loop_fusion ends by std::terminate: the writer thread must have the rows before abort().
+    const size_t unwritten = m.host->flushLog(2.0);
+    if (unwritten > 0)
+      ROS_ERROR("[rover] loop_fusion ends: %zu verdict rows not written to the log yet", unwritten);
+  });
+}
 
 bool LoopFusionAdapter::Impl::safeStart(bool use_imu, VerifierPtr injected, const std::string& type) {
   bool verifying = false;
@@ -217,12 +289,18 @@ bool LoopFusionAdapter::Impl::safeStart(bool use_imu, VerifierPtr injected, cons
   return false;
 }
 
-bool LoopFusionAdapter::initialize(bool use_imu) { return impl_->safeStart(use_imu, VerifierPtr(), ""); }
+bool LoopFusionAdapter::initialize(bool use_imu) {
+  const bool verifying = impl_->safeStart(use_imu, VerifierPtr(), "");
+  if (verifying) registerLive(this);
+  return verifying;
+}
 
 bool LoopFusionAdapter::initializeWithVerifier(bool use_imu, std::unique_ptr<LoopVerifier> verifier,
                                                const std::string& verifier_type) {
-  return impl_->safeStart(use_imu, VerifierPtr(verifier.release(), std::default_delete<LoopVerifier>()),
-                          verifier_type);
+  const bool verifying = impl_->safeStart(
+      use_imu, VerifierPtr(verifier.release(), std::default_delete<LoopVerifier>()), verifier_type);
+  if (verifying) registerLive(this);
+  return verifying;
 }
 
 void LoopFusionAdapter::addKeyframe(int index, double stamp, int sequence, const Eigen::Vector3d& P,
@@ -268,6 +346,7 @@ bool LoopFusionAdapter::verifyLoop(int query_index, int match_index, const LoopI
                            "patch complete?)", what.c_str());
         return;
       case Impl::Mode::kFailed:
+      case Impl::Mode::kFinished:
         v = rejection(c, "verifier not running: " + m.failure);
         break;
       case Impl::Mode::kFallback:

@@ -60,6 +60,7 @@ class LoopFusionAdapter {
 
   /// Does not touch ROS (loop_fusion's PoseGraph is a global object built before ros::init).
   LoopFusionAdapter();
+  /// finish(), then stops the verdict output (waits up to 2 s for the CSV log's last rows).
   ~LoopFusionAdapter();
   LoopFusionAdapter(const LoopFusionAdapter&) = delete;
   LoopFusionAdapter& operator=(const LoopFusionAdapter&) = delete;
@@ -119,6 +120,15 @@ class LoopFusionAdapter {
   /// keyframes belong to the loaded map, which loop_fusion holds fixed. Not published.
   /// Returns false if the verifier refused it (logged).
   bool commitStoredLoop(int query_index, int match_index, const LoopInfo& loop_info);
+
+  /// loop_fusion ends: every candidate still held gets its final verdict (unconfirmed, decision
+  /// drop, "still held when loop_fusion ended"), published and in the CSV log (flushed, up to
+  /// 2 s), so that the log has one final verdict per candidate; verification stops (later loops
+  /// are rejected). A second call does nothing. Called by the destructor, and on std::terminate:
+  /// upstream loop_fusion ends that way (its main returns with joinable threads, after the 's'
+  /// save and after Ctrl-C: exit status -6), without running any destructor; a verifying
+  /// adapter installs a terminate handler that calls finish() and then the previous handler.
+  void finish();
 
   /// true after initialize() set up the configured verifier (not the fallback).
   bool verifying() const;

@@ -32,10 +32,11 @@ int openNonBlocking(const std::string& path) {
 
 /// Writes all of data to the non-blocking fd, waiting (in kPollMs steps) while the reader of a
 /// pipe is not reading. 0, or the errno of the failure (ECANCELED when `stop` was set).
-int writeAll(int fd, const std::string& data, const std::atomic<bool>& stop) {
+int writeAll(int fd, const std::string& data, const std::atomic<bool>& stop, const VerdictLog::WriteFunction& write) {
   size_t off = 0;
   while (off < data.size()) {
-    const ssize_t w = ::write(fd, data.data() + off, data.size() - off);
+    errno = 0;
+    const ssize_t w = write(fd, data.data() + off, data.size() - off);
     if (w > 0) {
       off += static_cast<size_t>(w);
       continue;
@@ -69,9 +70,40 @@ struct VerdictLog::State {
   bool open_failed = false;
   size_t max_queued = 0;
   Stats stats;
+  WriteFunction write = [](int fd, const void* data, size_t size) { return ::write(fd, data, size); };
+  // A failed write of a regular file that could not be cut back: the file ends in a partial
+  // record, and the next one starts on a new line (writer thread only).
+  bool torn = false;
+
+  /// Writes one record (the header or a row) whole or not at all: in a regular file a write
+  /// that fails part-way is cut back to where the record began. 0 or the errno of the failure.
+  int writeRecord(int fd, const std::string& data);
 };
 
+int VerdictLog::State::writeRecord(int fd, const std::string& data) {
+  const off_t start = regular_file ? ::lseek(fd, 0, SEEK_END) : static_cast<off_t>(-1);
+  const int err = torn ? writeAll(fd, "\n" + data, stop, write) : writeAll(fd, data, stop, write);
+  if (err == 0) {
+    torn = false;
+    return 0;
+  }
+  if (start >= 0) {
+    struct stat st;
+    if (::fstat(fd, &st) == 0 && st.st_size > start && ::ftruncate(fd, start) != 0) {
+      torn = true;
+      ROS_ERROR("[rover] verdict log %s: a write failed part-way and the partial row cannot be removed (%s): the "
+                "file ends in a partial row at byte %lld; the next row starts on a new line",
+                path.c_str(), std::strerror(errno), static_cast<long long>(start));
+    }
+  }
+  return err;
+}
+
 VerdictLog::VerdictLog(size_t max_queued) : state_(new State) { state_->max_queued = max_queued; }
+
+void VerdictLog::setWriteFunction(WriteFunction write) {
+  if (!writer_.joinable() && write) state_->write = std::move(write);
+}
 
 VerdictLog::~VerdictLog() {
   if (!writer_.joinable()) return;
@@ -184,18 +216,19 @@ void VerdictLog::writerLoop() {
     s.in_flight = batch.size();
     const int fd = s.fd;
     const bool header = s.header_pending;
-    s.header_pending = false;
     lock.unlock();
 
     int err = 0;
     size_t written = 0, failed = 0;
-    if (fd >= 0 && header) err = writeAll(fd, s.header, s.stop);
+    // No row without the header before it: if it cannot be written (a full disk), the batch is
+    // lost and the header is tried again before the next one.
+    const bool header_written = fd >= 0 && header && (err = s.writeRecord(fd, s.header)) == 0;
     for (const std::string& row : batch) {
-      if (fd < 0 || err == EPIPE || err == ECANCELED) {
-        ++failed;  // open failed, the reader went away, or shutting down
+      if (fd < 0 || (header && !header_written) || err == EPIPE || err == ECANCELED) {
+        ++failed;  // open failed, no header, the reader went away, or shutting down
         continue;
       }
-      const int e = writeAll(fd, row, s.stop);
+      const int e = s.writeRecord(fd, row);
       if (e == 0) {
         ++written;
       } else {
@@ -205,6 +238,7 @@ void VerdictLog::writerLoop() {
     }
 
     lock.lock();
+    if (header_written) s.header_pending = false;
     s.in_flight = 0;
     s.stats.written += written;
     if (err == ECANCELED) {
@@ -213,8 +247,11 @@ void VerdictLog::writerLoop() {
     }
     s.stats.failed += failed;
     if (failed > 0 && fd >= 0)
-      ROS_ERROR_THROTTLE(5.0, "[rover] verdict log %s: write failed (%s); %zu verdict rows lost so far",
-                         s.path.c_str(), std::strerror(err), s.stats.failed);
+      ROS_ERROR_THROTTLE(5.0, "[rover] verdict log %s: write failed (%s)%s; %zu verdict rows lost so far (rows are "
+                         "whole or absent)",
+                         s.path.c_str(), std::strerror(err),
+                         header && !header_written ? ", the header too: no row is written before it" : "",
+                         s.stats.failed);
     if (err == EPIPE) {
       // The reader of a FIFO went away: wait for the next one.
       ::close(s.fd);

@@ -13,7 +13,7 @@ namespace rover_loop_fusion {
 
 bool VerdictOutput::initialize(ros::NodeHandle& nh, const Options& options, std::string* error) {
   options_ = options;
-  const uint32_t queue = static_cast<uint32_t>(std::max(1, options_.queue_size));
+  const uint32_t queue = static_cast<uint32_t>(std::max(kVerdictQueueSize, options_.queue_size));
   verdict_pub_ = nh.advertise<LoopVerdict>("loop_verdicts", queue);
   // Markers are for the eye: a small queue, latched for a late rviz.
   if (options_.markers) marker_pub_ = nh.advertise<visualization_msgs::MarkerArray>("loop_markers", 100, true);

@@ -19,16 +19,20 @@
 
 namespace rover_loop_fusion {
 
+/// The least outgoing queue of ~loop_verdicts per subscriber, in both hosts: roscpp drops the
+/// oldest message of a full queue without telling anyone, so it must hold every verdict a burst
+/// can produce (thousands of candidates timing out together, a backlog decided at shutdown).
+constexpr int kVerdictQueueSize = 100000;
+
 class VerdictOutput {
  public:
   struct Options {
     std::string frame_id = "world";  ///< frame of markers and verdict headers
     bool markers = true;
     std::string csv_path;  ///< empty: no CSV log
-    /// Outgoing queue of ~loop_verdicts per subscriber (and the most CSV rows waiting). roscpp
-    /// drops the oldest message of a full queue without telling anyone, so it must hold every
-    /// verdict a burst can produce: at least as many as candidates can be waiting in the host.
-    int queue_size = 100000;
+    /// Outgoing queue of ~loop_verdicts per subscriber: at least kVerdictQueueSize (a smaller
+    /// value is raised to it), more for a host that can hold more candidates waiting.
+    int queue_size = kVerdictQueueSize;
   };
 
   VerdictOutput() = default;
@@ -49,6 +53,8 @@ class VerdictOutput {
 
   size_t published() const { return count_; }
   const VerdictLog& log() const { return log_; }
+  /// Waits up to timeout_s for the CSV rows queued so far to be written; the rows still waiting.
+  size_t flushLog(double timeout_s) { return log_.isOpen() ? log_.flush(timeout_s) : 0; }
 
  private:
   Options options_;

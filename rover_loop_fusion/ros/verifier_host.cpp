@@ -268,11 +268,7 @@ core::Verdict VerifierHost::decide(const core::LoopCandidate& c) noexcept {
                           [&] {
                             v = verifier_->verify(c);
                             if (!v.accepted) return;
-                            const core::Status s = verifier_->commit(c);
-                            if (s.ok) return;
-                            v.accepted = false;
-                            v.reason = core::Reason::kInvalidInput;
-                            v.detail += "; but the verifier refused to commit it: " + s.message;
+                            core::rejectRefusedCommit(&v, verifier_->commit(c));
                           },
                           &why);
   if (!ok) v = rejection(c, "the verifier threw an exception: " + why);

@@ -131,6 +131,8 @@ class VerifierHost {
   void stopVerifier() { verifier_.reset(); }
   bool outputReady() const { return output_ready_; }
   const VerdictOutput& output() const { return output_; }
+  /// VerdictOutput::flushLog (a host that ends: its last verdicts into the CSV log).
+  size_t flushLog(double timeout_s) { return output_.flushLog(timeout_s); }
   std::string resolve(const std::string& key) const { return nh_.resolveName(key); }
 
   /// One decision: verify(c) and, if accepted, commit(c). A refused commit or anything the

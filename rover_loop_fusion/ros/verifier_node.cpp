@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <sstream>
 #include <vector>
 
@@ -22,6 +23,12 @@ namespace rover_loop_fusion {
 namespace {
 
 const size_t kRefusedKept = 10000;  // refused keyframe messages remembered to explain verdicts
+/// The least inbox: what arrives while one verification or optimisation runs (a bag at 400
+/// keyframes/s and a 200 ms time budget: 80 messages; loop_fusion's optimisation of a long run
+/// on the main thread: seconds). A smaller ~queue_size is raised to it with a ROS_WARN.
+const int kMinQueueSize = 1000;
+/// The largest keyframe number a candidate can name (loop_fusion's indices are int).
+const int64_t kMaxKeyframeNumber = std::numeric_limits<int32_t>::max();
 
 /// Nearest entry of `m` (keyed by stamp [ns]) within `tol` of `ns`; end() if none.
 template <typename Map>
@@ -82,6 +89,13 @@ bool VerifierNode::start(std::string* error) {
   }
   r.integer("optimize_iterations", &p.optimize_iterations, 1, 1000);
   r.integer("queue_size", &p.queue_size, 1, 10000000);
+  if (p.queue_size >= 1 && p.queue_size < kMinQueueSize) {
+    ROS_WARN("[rover] %s=%d cannot hold a burst of messages (what arrives during one verification or "
+             "optimisation): raised to %d. Messages beyond the inbox are not processed (a keyframe is refused, a "
+             "candidate gets an invalid_input verdict)",
+             host_.resolve("queue_size").c_str(), p.queue_size, kMinQueueSize);
+    p.queue_size = kMinQueueSize;
+  }
   const std::pair<const char*, const std::string*> topics[] = {{"keyframe_topic", &p.keyframe_topic},
                                                                {"candidate_topic", &p.candidate_topic}};
   for (const auto& topic : topics) {
@@ -143,7 +157,9 @@ int VerifierNode::spin(const std::atomic<bool>& stop) {
   stop_ = &stop;
   ros::CallbackQueue* queue = ros::getGlobalCallbackQueue();
   while (ros::ok() && !stop && exit_code_ == 0) queue->callAvailable(ros::WallDuration(0.1));
-  if (exit_code_ == 0) finish();
+  // Also when the master restarted (exit status 2): the verdicts cannot reach a subscriber
+  // then, but the CSV log gets every candidate's final verdict.
+  finish();
   return exit_code_;
 }
 
@@ -157,6 +173,7 @@ void VerifierNode::finish() {
       std::lock_guard<std::mutex> lock(inbox_mutex_);
       receiving_ = false;
       inbox.swap(inbox_);
+      inbox_overflow_ = 0;
     }
     const size_t waiting = waiting_.size();
     size_t unprocessed_keyframes = 0, unprocessed_candidates = 0;
@@ -176,17 +193,21 @@ void VerifierNode::finish() {
     }
     held_.clear();
     for (const Incoming& item : inbox) {
-      if (item.keyframe) {
+      if (!item.candidate) {
         ++unprocessed_keyframes;
         continue;
       }
       ++unprocessed_candidates;
-      reject(*item.candidate, -1, -1, "not verified: the node was shut down before it got to the candidate", false);
+      reject(*item.candidate, -1, -1,
+             item.dropped ? "not verified: " + droppedText()
+                          : "not verified: the node was shut down before it got to the candidate",
+             false);
     }
     refused_warning_.flush();
     if (inbox_dropped_ > 0)
-      ROS_ERROR("[rover] %zu messages were dropped because the inbox was full (queue_size=%d)", inbox_dropped_,
-                params_.queue_size);
+      ROS_ERROR("[rover] %zu messages arrived when the inbox was full (queue_size=%d) and were not processed: "
+                "keyframes refused, candidates rejected (invalid_input)",
+                inbox_dropped_, params_.queue_size);
     ROS_INFO("[rover] %s shutting down: %zu verdicts published; %zu candidates not verified (%zu waiting for "
              "keyframes, %zu not processed) got an invalid_input verdict saying so; %zu held candidates not "
              "confirmed got an unconfirmed verdict; %zu keyframe messages not processed",
@@ -204,13 +225,22 @@ void VerifierNode::receive(Incoming item) {
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
     if (!receiving_) return;
-    if (inbox_.size() >= static_cast<size_t>(params_.queue_size)) {
+    if (inbox_.size() - inbox_overflow_ >= static_cast<size_t>(params_.queue_size)) {
+      // Not processed, but not lost either: it keeps its place, so that a keyframe keeps its
+      // number and is refused with a reason, and a candidate gets its verdict. A keyframe keeps
+      // only its stamp (the inbox bounds what full messages wait).
       ++inbox_dropped_;
-      ROS_ERROR_THROTTLE(1.0, "[rover] %s message dropped: %zu messages are waiting to be processed "
-                         "(queue_size=%d; %zu dropped so far); verification is slower than the input",
+      ++inbox_overflow_;
+      ROS_ERROR_THROTTLE(1.0, "[rover] %s message not processed: %zu messages are waiting (queue_size=%d; %zu not "
+                         "processed so far); verification is slower than the input. %s",
                          item.keyframe ? "keyframe" : "loop candidate", inbox_.size(), params_.queue_size,
-                         inbox_dropped_);
-      return;
+                         inbox_dropped_,
+                         item.keyframe ? "The keyframe is refused" : "The candidate gets an invalid_input verdict");
+      item.dropped = true;
+      if (item.keyframe) {
+        item.dropped_stamp_ns = toNs(item.keyframe->header.stamp);
+        item.keyframe.reset();
+      }
     }
     inbox_.push_back(std::move(item));
     if (inbox_.size() > inbox_peak_) {
@@ -241,9 +271,11 @@ void VerifierNode::drainSome(size_t max_items) {
       if (n == max_items) break;  // still scheduled: comes back after the other callbacks
       item = std::move(inbox_.front());
       inbox_.pop_front();
+      if (item.dropped) --inbox_overflow_;
     }
-    if (item.keyframe) onKeyframe(item.keyframe);
-    if (item.candidate) onCandidate(item.candidate);
+    if (item.dropped) onDropped(item);
+    else if (item.keyframe) onKeyframe(item.keyframe);
+    else if (item.candidate) onCandidate(item.candidate);
   }
   ros::getGlobalCallbackQueue()->addCallback(boost::make_shared<DrainCallback>(this),
                                              reinterpret_cast<uint64_t>(this));
@@ -256,6 +288,28 @@ void VerifierNode::onKeyframe(const nav_msgs::Odometry::ConstPtr& msg) {
     const int64_t index = next_index_++;
     addKeyframe(*msg, index);
     wake(toNs(msg->header.stamp), index);
+  });
+}
+
+std::string VerifierNode::droppedText() const {
+  return "it arrived when the node's inbox was full (queue_size=" + std::to_string(params_.queue_size) +
+         " messages waiting: verification is slower than the input)";
+}
+
+void VerifierNode::onDropped(const Incoming& item) {
+  guarded("message not processed", [&] {
+    if (item.candidate) {
+      const LoopCandidate& msg = *item.candidate;
+      int64_t q = -1, m = -1;
+      std::string ignored;
+      resolve(msg.query_index, msg.query_stamp, "query", &q, &ignored);
+      resolve(msg.match_index, msg.match_stamp, "match", &m, &ignored);
+      reject(msg, q, m, "not verified: " + droppedText());
+      return;
+    }
+    const int64_t index = next_index_++;
+    refuseKeyframe(index, item.dropped_stamp_ns, "not processed: " + droppedText());
+    wake(item.dropped_stamp_ns, index);  // candidates waiting for it: rejected, saying why
   });
 }
 
@@ -329,6 +383,12 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
   const std::string who = std::string(role) + " keyframe ";
   if (index < -1) {
     *why = who + "index " + std::to_string(index) + " is negative (-1 names a keyframe by its stamp)";
+    return Resolution::kInvalid;
+  }
+  if (index > kMaxKeyframeNumber) {
+    // No keyframe can ever have it: invalid now, not after candidate_timeout.
+    *why = who + "index " + std::to_string(index) + " cannot name a keyframe (keyframes are numbered in arrival "
+           "order, at most " + std::to_string(kMaxKeyframeNumber) + " as loop_fusion's int indices)";
     return Resolution::kInvalid;
   }
   if (index >= 0) {
@@ -424,7 +484,14 @@ void VerifierNode::expire() {
 // ---- verdicts --------------------------------------------------------------------------------
 
 void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match) {
-  const core::LoopCandidate c = fromCandidateMsg(msg, query, match);
+  // The match keyframe's VIO rotation, for a relative_yaw the message leaves NaN (loop_fusion's
+  // convention: the difference of world yaws; the graph's keyframes are anchored by a yaw at
+  // most, which leaves that difference as it is).
+  core::Pose match_vio;
+  size_t match_pos = 0;
+  if (!graph_->find(match, &match_pos) || !graph_->vioAt(match_pos, &match_vio))
+    match_vio.q = Eigen::Quaterniond(std::nan(""), 0.0, 0.0, 0.0);  // unknown: the yaw stays NaN (invalid)
+  const core::LoopCandidate c = fromCandidateMsg(msg, query, match, match_vio.q);
   core::Verdict v = host_.decide(c);
   if (v.accepted) useLoop(c, &v);
   v.query_index = query;
@@ -490,6 +557,9 @@ void VerifierNode::applyDecisions() {
 }
 
 void VerifierNode::reject(const LoopCandidate& msg, int64_t query, int64_t match, const std::string& why, bool log) {
+  // A keyframe named by number that did not resolve: the verdict names the number given.
+  if (query < 0 && msg.query_index >= 0) query = msg.query_index;
+  if (match < 0 && msg.match_index >= 0) match = msg.match_index;
   core::LoopCandidate c;
   c.query_index = query;
   c.match_index = match;

@@ -24,10 +24,15 @@
 // Nothing a message contains stops the node.
 //
 // Threading: the subscriptions have their own callback queue and thread, which only append
-// each message to an inbox (at most ~queue_size messages). The node's main thread takes them
-// from the inbox in arrival order and does the work. A verification that takes longer than
-// the input rate (a bag played at 200x) therefore never makes roscpp drop keyframe messages;
-// if the inbox is full, the message is dropped with a ROS_ERROR (counted).
+// each message to an inbox (at most ~queue_size messages, at least 1000: a smaller value is
+// raised with a ROS_WARN). The node's main thread takes them from the inbox in arrival order
+// and does the work. A verification that takes longer than the input rate (a bag played at
+// 200x) therefore never makes roscpp drop keyframe messages. A message that arrives when the
+// inbox is full is not processed, but keeps its place (ROS_ERROR, counted): a keyframe keeps
+// only its stamp and number and is refused ("dropped: the inbox was full"), so candidates that
+// name it say why; a candidate gets an invalid_input verdict saying it was not verified.
+// Every candidate gets a verdict. ~loop_verdicts queues at least 100000 verdicts per
+// subscriber (kVerdictQueueSize), more if queue_size is larger, whatever queue_size says.
 //
 // Held candidates: a candidate the verifier holds gets a deferred verdict (final: false) and,
 // when the verifier decides (after a later keyframe or candidate), its final one: released
@@ -41,7 +46,8 @@
 //
 // Master watchdog: the node checks the ROS master every second; if it restarted (new
 // /run_id), the node's registrations are gone, so it exits with status 2 and a ROS_FATAL
-// saying so; verifier.launch respawns it.
+// saying so, after giving every candidate it has not decided its final verdict as at a
+// shutdown (in the CSV log; nobody can receive the topic); verifier.launch respawns it.
 #pragma once
 
 #include "rover_loop_fusion/LoopCandidate.h"
@@ -76,7 +82,7 @@ struct VerifierNodeParams {
   double stamp_tolerance = 1e-3;   ///< [s] a candidate's stamp names the nearest keyframe within it
   double optimize_period = 2.0;    ///< [s, wall clock] loop_fusion-like optimisation; 0: on ~optimize only
   int optimize_iterations = 5;     ///< loop_fusion's optimize4DoF: 5
-  int queue_size = 100000;         ///< messages waiting to be processed (inbox, subscriber and verdict queues)
+  int queue_size = 100000;         ///< messages waiting to be processed (inbox and subscriber queues), >= 1000
 };
 
 class VerifierNode {
@@ -89,9 +95,9 @@ class VerifierNode {
   /// false with *error naming the parameter when the node cannot run.
   bool start(std::string* error);
 
-  /// Runs the main thread's callbacks until ros::ok() ends or `stop` is set (a signal
-  /// handler's flag), then finish(). Returns the process's exit status: 0, or 2 when the
-  /// master restarted.
+  /// Runs the main thread's callbacks until ros::ok() ends, `stop` is set (a signal handler's
+  /// flag) or the master restarted, then finish(). Returns the process's exit status: 0, or 2
+  /// when the master restarted.
   int spin(const std::atomic<bool>& stop);
 
   /// Stops taking messages and gives every candidate not decided yet (waiting, or still in
@@ -107,10 +113,14 @@ class VerifierNode {
  private:
   typedef WaitingCandidates<LoopCandidate>::Wait WaitKey;
   enum class Resolution { kFound, kWait, kInvalid };
-  /// A message as received: exactly one of the two is set.
+  /// A message as received: exactly one of the two is set, or neither for a keyframe that
+  /// arrived when the inbox was full (dropped: only its stamp is kept). `dropped`: not to be
+  /// processed (the inbox was full): a keyframe is refused, a candidate rejected.
   struct Incoming {
     nav_msgs::Odometry::ConstPtr keyframe;
     LoopCandidate::ConstPtr candidate;
+    bool dropped = false;
+    int64_t dropped_stamp_ns = 0;
   };
   class DrainCallback;
 
@@ -120,6 +130,10 @@ class VerifierNode {
   /// if more are waiting (so that timers and the service still get their turn).
   void drainSome(size_t max_items);
   void onKeyframe(const nav_msgs::Odometry::ConstPtr& msg);
+  /// A keyframe or candidate message that arrived when the inbox was full, in its turn.
+  void onDropped(const Incoming& item);
+  /// Why a dropped message was not processed (names queue_size).
+  std::string droppedText() const;
   void onCandidate(const LoopCandidate::ConstPtr& msg);
   bool onOptimize(Optimize::Request& req, Optimize::Response& res);
   void onPendingTimer(const ros::WallTimerEvent&);
@@ -171,7 +185,8 @@ class VerifierNode {
   bool drain_scheduled_ = false;
   bool receiving_ = true;
   size_t inbox_peak_ = 0;
-  size_t inbox_dropped_ = 0;
+  size_t inbox_dropped_ = 0;   // messages that arrived when the inbox was full
+  size_t inbox_overflow_ = 0;  // of those, still in the inbox
   std::unique_ptr<ros::AsyncSpinner> receiver_;
 
   const std::atomic<bool>* stop_ = nullptr;  // set by spin(): checked between messages

@@ -3,7 +3,10 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <algorithm>
 #include <fstream>
+#include <limits>
+#include <map>
 #include <sstream>
 
 namespace rover_loop_fusion {
@@ -45,24 +48,78 @@ bool toInt(const std::string& s, int64_t* v) {
   return end == s.c_str() + s.size() && errno != ERANGE;
 }
 
+/// A row of these files is a few hundred bytes; a longer line is refused without being held in
+/// memory (a 60 MB line cost 417 MB before the error when whole files and lines were copied).
+const size_t kMaxLine = 65536;
+
+/// The lines of a file's text, read from a string (without copying it) or a stream (one line at
+/// a time, at most kMaxLine bytes of it held). A leading UTF-8 byte order mark is skipped.
+class Lines {
+ public:
+  explicit Lines(const std::string& text) : text_(&text) {}
+  explicit Lines(std::istream& in) : in_(&in) {}
+  /// The next line without its '\n'; false at the end. *too_long: longer than kMaxLine (the
+  /// line is cut there, the rest of it skipped).
+  bool next(std::string* line, bool* too_long) {
+    line->clear();
+    *too_long = false;
+    bool got = text_ ? fromText(line, too_long) : fromStream(line, too_long);
+    if (got && first_) {
+      first_ = false;
+      // A UTF-8 byte order mark (spreadsheets write one) is not part of the header.
+      if (line->compare(0, 3, "\xEF\xBB\xBF") == 0) line->erase(0, 3);
+    }
+    return got;
+  }
+
+ private:
+  bool fromText(std::string* line, bool* too_long) {
+    if (pos_ >= text_->size()) return false;
+    size_t end = text_->find('\n', pos_);
+    if (end == std::string::npos) end = text_->size();
+    const size_t n = end - pos_;
+    *too_long = n > kMaxLine;
+    line->assign(*text_, pos_, std::min(n, kMaxLine));
+    pos_ = end + 1;
+    return true;
+  }
+  bool fromStream(std::string* line, bool* too_long) {
+    std::streambuf* buf = in_->rdbuf();
+    bool any = false;
+    for (;;) {
+      const int c = buf->sbumpc();
+      if (c == std::char_traits<char>::eof()) return any;
+      any = true;
+      if (c == '\n') return true;
+      if (line->size() < kMaxLine) line->push_back(static_cast<char>(c));
+      else *too_long = true;
+    }
+  }
+
+  const std::string* text_ = nullptr;
+  std::istream* in_ = nullptr;
+  size_t pos_ = 0;
+  bool first_ = true;
+};
+
 /// Calls row(fields, error) for every data line after checking the header.
 template <class Row>
-bool parseTable(const std::string& text, const std::string& name, const std::string& header, Row row,
-                std::string* error) {
-  // A UTF-8 byte order mark (spreadsheets write one) is not part of the header.
-  std::istringstream in(text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? text.substr(3) : text);
+bool parseTable(Lines& in, const std::string& name, const std::string& header, Row row, std::string* error) {
   std::string line;
+  bool too_long = false;
   int lineno = 0;
   bool have_header = false;
   const size_t columns = split(header).size();
-  while (std::getline(in, line)) {
+  while (in.next(&line, &too_long)) {
     ++lineno;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
     auto fail = [&](const std::string& what) {
       *error = name + ":" + std::to_string(lineno) + ": " + what;
       return false;
     };
+    if (too_long)
+      return fail("a line longer than " + std::to_string(kMaxLine) + " bytes (not a row of " + name + ")");
+    const std::string t = trim(line);
+    if (t.empty() || t[0] == '#') continue;
     if (!have_header) {
       if (t != header) return fail("expected the header '" + header + "'");
       have_header = true;
@@ -101,22 +158,10 @@ core::Pose pose(const double* p) {  // x y z qx qy qz qw
   return core::Pose(Eigen::Vector3d(p[0], p[1], p[2]), Eigen::Quaterniond(p[6], p[3], p[4], p[5]));
 }
 
-bool readFile(const std::string& path, std::string* text, std::string* error) {
-  std::ifstream f(path);
-  if (!f) {
-    *error = "cannot read " + path;
-    return false;
-  }
-  std::ostringstream ss;
-  ss << f.rdbuf();
-  *text = ss.str();
-  return true;
-}
-
 }  // namespace
 
-bool parseKeyframes(const std::string& text, const std::string& name,
-                    std::vector<ScenarioKeyframe>* out, std::string* error) {
+bool parseKeyframes(Lines& text, const std::string& name, std::vector<ScenarioKeyframe>* out,
+                    std::string* error) {
   out->clear();
   return parseTable(text, name, "index,stamp,sequence,x,y,z,qx,qy,qz,qw",
                     [&](const std::vector<std::string>& f, std::string* what) {
@@ -138,8 +183,8 @@ bool parseKeyframes(const std::string& text, const std::string& name,
                     error);
 }
 
-bool parseCandidates(const std::string& text, const std::string& name,
-                     std::vector<ScenarioCandidate>* out, std::string* error) {
+bool parseCandidates(Lines& text, const std::string& name, std::vector<ScenarioCandidate>* out,
+                     std::string* error) {
   out->clear();
   return parseTable(
       text, name, "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label",
@@ -159,7 +204,12 @@ bool parseCandidates(const std::string& text, const std::string& name,
         c.candidate.relative_t = p.t;
         c.candidate.relative_q = p.q;
         c.candidate.relative_yaw = v[7];
-        c.candidate.inliers = inliers < -1 || inliers > 1000000000 ? -1 : static_cast<int>(inliers);
+        if (inliers < -1 || inliers > std::numeric_limits<int>::max()) {
+          *what = "inliers " + f[10] + " out of range (-1: unknown, or 0 to " +
+                  std::to_string(std::numeric_limits<int>::max()) + ")";
+          return false;
+        }
+        c.candidate.inliers = static_cast<int>(inliers);
         c.label = static_cast<int>(label);
         out->push_back(c);
         return true;
@@ -167,15 +217,28 @@ bool parseCandidates(const std::string& text, const std::string& name,
       error);
 }
 
-bool parseGroundTruth(const std::string& text, const std::string& name,
-                      std::vector<int64_t>* index, std::vector<core::Pose>* out, std::string* error) {
+bool parseGroundTruth(Lines& text, const std::string& name, std::vector<int64_t>* index,
+                      std::vector<core::Pose>* out, std::string* error) {
   index->clear();
   out->clear();
+  std::map<int64_t, size_t> seen;  // index -> its row (1-based among the data rows)
   return parseTable(text, name, "index,x,y,z,qx,qy,qz,qw",
                     [&](const std::vector<std::string>& f, std::string* what) {
                       int64_t i = 0;
                       double v[7];
                       if (!integer(f, 0, &i, what) || !numbers(f, 1, 7, v, what)) return false;
+                      // Ground truth is what everything is measured against: no NaN, no second
+                      // pose for a keyframe (ATE and evaluate.py would use either, or fail).
+                      for (int j = 0; j < 7; ++j)
+                        if (!std::isfinite(v[j])) {
+                          *what = "field " + std::to_string(j + 2) + " '" + f[j + 1] + "' is not finite";
+                          return false;
+                        }
+                      if (!seen.emplace(i, index->size() + 1).second) {
+                        *what = "keyframe " + f[0] + " has a ground-truth pose already (data row " +
+                                std::to_string(seen[i]) + ")";
+                        return false;
+                      }
                       index->push_back(i);
                       out->push_back(pose(v));
                       return true;
@@ -183,23 +246,45 @@ bool parseGroundTruth(const std::string& text, const std::string& name,
                     error);
 }
 
+bool parseKeyframes(const std::string& text, const std::string& name, std::vector<ScenarioKeyframe>* out,
+                    std::string* error) {
+  Lines lines(text);
+  return parseKeyframes(lines, name, out, error);
+}
+
+bool parseCandidates(const std::string& text, const std::string& name, std::vector<ScenarioCandidate>* out,
+                     std::string* error) {
+  Lines lines(text);
+  return parseCandidates(lines, name, out, error);
+}
+
+bool parseGroundTruth(const std::string& text, const std::string& name, std::vector<int64_t>* index,
+                      std::vector<core::Pose>* out, std::string* error) {
+  Lines lines(text);
+  return parseGroundTruth(lines, name, index, out, error);
+}
+
 bool loadScenario(const std::string& dir, Scenario* s, std::string* error) {
-  std::string text;
-  if (!readFile(dir + "/keyframes.csv", &text, error) ||
-      !parseKeyframes(text, "keyframes.csv", &s->keyframes, error))
-    return false;
-  if (!readFile(dir + "/candidates.csv", &text, error) ||
-      !parseCandidates(text, "candidates.csv", &s->candidates, error))
-    return false;
+  // Each file is read line by line (a line at most kMaxLine bytes), never whole.
+  auto read = [&](const std::string& file, bool optional, auto parse) {
+    std::ifstream in(dir + "/" + file, std::ios::binary);
+    if (!in) {
+      if (optional) return true;
+      *error = "cannot read " + dir + "/" + file;
+      return false;
+    }
+    Lines lines(in);
+    return parse(lines, file);
+  };
   s->truth.clear();
   s->truth_index.clear();
-  std::ifstream gt(dir + "/groundtruth.csv");
-  if (gt) {
-    if (!readFile(dir + "/groundtruth.csv", &text, error) ||
-        !parseGroundTruth(text, "groundtruth.csv", &s->truth_index, &s->truth, error))
-      return false;
-  }
-  return true;
+  return read("keyframes.csv", false,
+              [&](Lines& l, const std::string& f) { return parseKeyframes(l, f, &s->keyframes, error); }) &&
+         read("candidates.csv", false,
+              [&](Lines& l, const std::string& f) { return parseCandidates(l, f, &s->candidates, error); }) &&
+         read("groundtruth.csv", true, [&](Lines& l, const std::string& f) {
+           return parseGroundTruth(l, f, &s->truth_index, &s->truth, error);
+         });
 }
 
 }  // namespace sim

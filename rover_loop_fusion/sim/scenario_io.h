@@ -35,9 +35,11 @@ struct Scenario {
 };
 
 /// Parses CSV text of one of the three files (a leading UTF-8 byte order mark is skipped). On
-/// error returns false and sets `error` to "<name>:<line>: what". Values are parsed, not judged:
-/// NaN, a denormal like 1e-320 or an unknown index is the verifier's business; a number beyond
-/// the range of double (1e999) is an error.
+/// error returns false and sets `error` to "<name>:<line>: what". Keyframes and candidates are
+/// parsed, not judged: NaN, a denormal like 1e-320 or an unknown index is the verifier's
+/// business; a number beyond the range of double (1e999), an inlier count outside -1 ..
+/// INT_MAX and a line longer than 64 kB are errors. Ground truth is judged: a value that is
+/// not finite, or a second pose for one keyframe, is an error.
 bool parseKeyframes(const std::string& text, const std::string& name,
                     std::vector<ScenarioKeyframe>* out, std::string* error);
 bool parseCandidates(const std::string& text, const std::string& name,
@@ -45,7 +47,7 @@ bool parseCandidates(const std::string& text, const std::string& name,
 bool parseGroundTruth(const std::string& text, const std::string& name,
                       std::vector<int64_t>* index, std::vector<core::Pose>* out, std::string* error);
 
-/// Reads a scenario directory (groundtruth.csv optional).
+/// Reads a scenario directory (groundtruth.csv optional), each file line by line.
 bool loadScenario(const std::string& dir, Scenario* out, std::string* error);
 
 }  // namespace sim

@@ -15,7 +15,9 @@
 // `rover_replay --help` lists every parameter with its unit, range and default.
 //
 // Protocols:
-//   sequential  commit what the verifier accepts (what the product does);
+//   sequential  commit what the verifier accepts (what the product does); a verdict says what
+//               was committed: an accepted loop whose commit is refused (the same loop again)
+//               is invalid_input, as the hosts report it (core::rejectRefusedCommit);
 //   oracle      commit only candidates labelled true (scores every candidate against the
 //               graph a perfect verifier would have built: for ranking metrics, AP / MR);
 //   none        commit nothing (every candidate scored against odometry alone).
@@ -182,10 +184,12 @@ int main(int argc, char** argv) {
   for (size_t i = 0; i < s.candidates.size(); ++i)
     by_query.emplace(s.candidates[i].candidate.query_index, i);
   std::map<int64_t, double> stamp_of;
+  std::map<int64_t, int> upcoming;  // keyframe indices still to come (how often)
+  for (const sim::ScenarioKeyframe& k : s.keyframes) ++upcoming[k.index];
 
   core::Verifier verifier(cfg);
   core::KeyframeGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
-  int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0;
+  int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0, oracle_refused = 0;
   size_t verified = 0;
   double verify_ms = 0.0;
   std::vector<double> stamps;
@@ -231,11 +235,25 @@ int main(int argc, char** argv) {
                      x->score, x->threshold, x->window_size, x->iterations, x->elapsed_ms);
       std::fprintf(trials_csv, "\n");
     }
-    const core::Verdict v = verifier.verify(c);
+    // A match that has not arrived but comes later: the query is older than its match (the
+    // verifier would only know "unknown match keyframe"; the node says the same as this).
+    core::Verdict v = !stamp_of.count(c.match_index) && upcoming.count(c.match_index)
+                          ? core::Verdict::Reject(core::Reason::kInvalidInput, c,
+                                                  "match keyframe " + std::to_string(c.match_index) +
+                                                      " comes after query keyframe " + std::to_string(c.query_index) +
+                                                      " in keyframes.csv: the match must be the older keyframe")
+                          : verifier.verify(c);
     ++verified;
     verify_ms += v.elapsed_ms;
-    const bool commit = protocol == "sequential" ? v.accepted : protocol == "oracle" ? sc.label == 1 : false;
-    if (commit) verifier.commit(c);
+    if (protocol == "sequential" && v.accepted) {
+      // What the product does (VerifierHost::decide): a loop whose commit is refused (the same
+      // loop again) is not in the graph, and its verdict says so.
+      core::rejectRefusedCommit(&v, verifier.commit(c));
+    } else if (protocol == "oracle" && sc.label == 1) {
+      // The oracle's graph: every true loop once (a repeated one is refused; the verdict is
+      // verify()'s, the ranking protocol's score).
+      if (!verifier.commit(c)) ++oracle_refused;
+    }
     accept_all.addLoop(c);
     Row row;
     row.verdict = v;
@@ -266,6 +284,7 @@ int main(int argc, char** argv) {
   };
   for (const sim::ScenarioKeyframe& k : s.keyframes) {
     ++handled_keyframes;
+    if (--upcoming[k.index] == 0) upcoming.erase(k.index);
     const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     if (!st) {
@@ -332,6 +351,8 @@ int main(int argc, char** argv) {
   }
   std::printf("rover_replay: %zu keyframes (%d refused), %zu candidates, protocol %s, threshold %.2f m\n",
               stamps.size(), refused_keyframes, verified, protocol.c_str(), cfg.threshold);
+  if (oracle_refused > 0)
+    std::printf("rover_replay: %d true candidates not committed by the oracle (the same loop again)\n", oracle_refused);
   if (tp + fp + tn + fn > 0)
     std::printf("rover_replay: TP %d FP %d TN %d FN %d  precision %s recall %s\n", tp, fp, tn, fn,
                 sim::ratioText(tp, tp + fp).c_str(), sim::ratioText(tp, tp + fn).c_str());

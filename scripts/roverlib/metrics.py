@@ -133,7 +133,8 @@ def _pr_axes(ax, curves, title):
     ax.set_ylim(0.0, 1.05)
     ax.grid(alpha=0.3)
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=6, loc="lower left")
+    if any(len(m["recall"]) for _, m in curves):  # no curve (AP undefined): no legend
+        ax.legend(fontsize=6, loc="lower left")
 
 
 def plot_pr(curves, path, title=""):

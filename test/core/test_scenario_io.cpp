@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 
 using namespace rover_loop_fusion::sim;
 
@@ -74,4 +76,61 @@ TEST(ScenarioIo, MalformedInputSaysWhereAndWhat) {
   Scenario s;
   EXPECT_FALSE(loadScenario("/nonexistent/dir", &s, &err));
   EXPECT_NE(err.find("cannot read"), std::string::npos) << err;
+}
+
+TEST(ScenarioIo, RefusesInliersOutOfRangeAndBadGroundTruthSayingWhere) {
+  // Issue 22 item 8: inliers 99999999999 silently became -1; ground truth with NaN or a second
+  // pose for a keyframe was accepted (evaluate.py then failed: "SVD did not converge").
+  const std::string header = "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label\n";
+  std::vector<ScenarioCandidate> c;
+  std::string err;
+  EXPECT_FALSE(parseCandidates(header + "120,4,0.1,0,0,0,0,0,1,0.02,99999999999,1\n", "c", &c, &err));
+  EXPECT_EQ(err, "c:2: inliers 99999999999 out of range (-1: unknown, or 0 to 2147483647)");
+  EXPECT_FALSE(parseCandidates(header + "120,4,0.1,0,0,0,0,0,1,0.02,-2,1\n", "c", &c, &err));
+  EXPECT_NE(err.find("c:2: inliers -2 out of range"), std::string::npos) << err;
+  ASSERT_TRUE(parseCandidates(header + "120,4,0.1,0,0,0,0,0,1,0.02,2147483647,1\n1,0,0,0,0,0,0,0,1,0,-1,0\n", "c",
+                              &c, &err))
+      << err;
+  EXPECT_EQ(c[0].candidate.inliers, 2147483647);
+  EXPECT_EQ(c[1].candidate.inliers, -1);
+
+  std::vector<int64_t> index;
+  std::vector<rover_loop_fusion::core::Pose> gt;
+  const std::string gt_header = "index,x,y,z,qx,qy,qz,qw\n";
+  EXPECT_FALSE(parseGroundTruth(gt_header + "0,0,0,0,0,0,0,1\n1,nan,0,0,0,0,0,1\n", "g", &index, &gt, &err));
+  EXPECT_EQ(err, "g:3: field 2 'nan' is not finite");
+  EXPECT_FALSE(parseGroundTruth(gt_header + "0,0,0,0,0,0,0,1\n1,1,0,0,0,0,inf,1\n", "g", &index, &gt, &err));
+  EXPECT_EQ(err, "g:3: field 7 'inf' is not finite");
+  EXPECT_FALSE(parseGroundTruth(gt_header + "0,0,0,0,0,0,0,1\n1,1,0,0,0,0,0,1\n1,1,0,0,0,0,0,1\n", "g", &index, &gt,
+                                &err));
+  EXPECT_EQ(err, "g:4: keyframe 1 has a ground-truth pose already (data row 2)");
+  EXPECT_TRUE(parseGroundTruth(gt_header + "0,0,0,0,0,0,0,1\n1,1,0,0,0,0,0,1\n", "g", &index, &gt, &err)) << err;
+  EXPECT_EQ(index.size(), 2u);
+}
+
+TEST(ScenarioIo, AVeryLongLineIsRefusedAsSuch) {
+  // Issue 22 item 8: a single 60 MB line cost rover_replay 417 MB before the error (whole files
+  // and lines copied); lines are now read one at a time and at most 64 kB of one is held. Here
+  // (1 MB) from text and from a scenario directory on disk.
+  const std::string header = "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label\n";
+  const std::string long_line(1 << 20, '1');
+  std::vector<ScenarioCandidate> c;
+  std::string err;
+  EXPECT_FALSE(parseCandidates(header + long_line + "\n", "c", &c, &err));
+  EXPECT_EQ(err, "c:2: a line longer than 65536 bytes (not a row of c)");
+  const std::string dir = ::testing::TempDir() + "rover_long_line_scenario";
+  ASSERT_EQ(std::system(("rm -rf " + dir + " && mkdir -p " + dir).c_str()), 0);
+  {
+    std::ofstream k(dir + "/keyframes.csv");
+    k << "index,stamp,sequence,x,y,z,qx,qy,qz,qw\n0,1,1,0,0,0,0,0,0,1\n";
+    std::ofstream f(dir + "/candidates.csv");
+    f << header << long_line << "\n";
+  }
+  Scenario s;
+  EXPECT_FALSE(loadScenario(dir, &s, &err));
+  EXPECT_EQ(err, "candidates.csv:2: a line longer than 65536 bytes (not a row of candidates.csv)");
+  // A line just within the limit is read (and refused for what it holds).
+  EXPECT_FALSE(parseCandidates(header + std::string(65536, '1') + "\n", "c", &c, &err));
+  EXPECT_NE(err.find("expected 12 fields"), std::string::npos) << err;
+  std::system(("rm -rf " + dir).c_str());
 }

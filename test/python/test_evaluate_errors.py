@@ -93,3 +93,139 @@ def test_missing_columns_and_missing_files(tmp_path, capsys, good_labels):
     status, err = run(capsys, "--verdicts", str(tmp_path / "nope.csv"), "--labels", good_labels)
     assert (status, len(err)) == (2, 1)
     assert "nope.csv: cannot read the verdict log: No such file or directory" in err[0]
+
+
+# ---- issue 22 item 5: figures a user must not trust are refused, with the reason ----------------
+
+def node_log(tmp_path, rows, name="node.csv"):
+    """A node's ~verdict_log: rows (query, match, accepted, reason, score, final, decision)."""
+    p = tmp_path / name
+    p.write_text(HEADER + ",final,decision\n" + "".join(
+        f"0,0,{q},{m},{a},{reason},{s},0.2,1,3,10,1,1,-1,0.1,5,test,\"\",{f},{d}\n"
+        for q, m, a, reason, s, f, d in rows))
+    return str(p)
+
+
+def eighty(tmp_path):
+    """80 labelled candidates (every other one true) and their verdict rows, all right."""
+    pairs = [(100 + i, i, i % 2) for i in range(80)]
+    return labels(tmp_path, pairs), [(q, m, lab, 0.1 if lab else 0.5) for q, m, lab in pairs]
+
+
+def test_lost_verdicts_are_refused_not_scored_as_fewer_candidates(tmp_path, capsys):
+    # Before: a log missing 70 of 80 labelled candidates was scored as "10 labelled candidates", exit 0.
+    c, rows = eighty(tmp_path)
+    v = verdicts(tmp_path, rows[:10])
+    status, err = run(capsys, "--verdicts", v, "--labels", c)
+    assert (status, len(err)) == (2, 1), err
+    assert f"70 of the 80 candidates in {c} have no verdict (lost verdicts; the first: loop 110 -> 10)" in err[0]
+    assert "not scored" in err[0] and "labelled candidates" not in run.out
+    # candidates labelled -1 (unknown) need their verdict too
+    c2 = labels(tmp_path, [(10, 1, 1), (20, 2, 0), (30, 3, -1)])
+    status, err = run(capsys, "--verdicts", verdicts(tmp_path, [(10, 1, 1, 0.1), (20, 2, 0, 0.5)]), "--labels", c2)
+    assert status == 2 and "1 of the 3 candidates" in err[0] and "loop 30 -> 3" in err[0]
+
+
+def test_verdicts_for_unknown_pairs_and_repeated_rows_are_refused(tmp_path, capsys):
+    c, rows = eighty(tmp_path)
+    v = verdicts(tmp_path, rows + [(999, 5, 1, 0.1)])
+    status, err = run(capsys, "--verdicts", v, "--labels", c)
+    assert (status, len(err)) == (2, 1), err
+    assert "the first at line 82: loop 999 -> 5 is not in" in err[0]
+    v = verdicts(tmp_path, rows[:1] + rows)  # the first row twice
+    status, err = run(capsys, "--verdicts", v, "--labels", c)
+    assert (status, len(err)) == (2, 1), err
+    assert "the first at line 3: more verdicts for loop 100 -> 0 than" in err[0] and "repeated row" in err[0]
+    # a pair the label file lists twice (the same loop proposed twice) takes two verdicts
+    c2 = labels(tmp_path, [(10, 1, 1), (10, 1, 1), (20, 2, 0)])
+    status, err = run(capsys, "--verdicts", verdicts(tmp_path, [(10, 1, 1, 0.1), (10, 1, 0, 0.1), (20, 2, 0, 0.5)]),
+                      "--labels", c2)
+    assert status == 0, err
+    assert "3 labelled candidates (2 true, 1 false)" in run.out
+
+
+@pytest.mark.parametrize("score, why", [("abc", "score 'abc' is not a number"), ("", "score '' is not a number"),
+                                        ("-1e308", "score -1e308 is negative"), ("-inf", "score -inf is negative"),
+                                        ("-0.1", "score -0.1 is negative")])
+def test_scores_that_are_not_numbers_or_negative_are_refused(tmp_path, capsys, good_labels, score, why):
+    v = verdicts(tmp_path, [(10, 1, 1, 0.1), (20, 2, 1, score)])
+    status, err = run(capsys, "--verdicts", v, "--labels", good_labels)
+    assert (status, len(err)) == (2, 1), err
+    assert err[0].startswith(f"evaluate.py: error: {v}:3: {why}"), err
+
+
+def test_no_score_ranks_last(tmp_path, capsys, good_labels):
+    for score in ("nan", "inf"):
+        status, err = run(capsys, "--verdicts", verdicts(tmp_path, [(10, 1, 1, 0.1), (20, 2, 0, score)]),
+                          "--labels", good_labels)
+        assert status == 0, err
+        assert "AP 1.0000" in run.out
+
+
+def test_a_nodes_log_is_read_as_each_candidates_final_verdict(tmp_path, capsys):
+    c = labels(tmp_path, [(10, 1, 1), (20, 2, 0), (30, 3, 1), (40, 4, 0), (50, 5, 1)])
+    rows = [(10, 1, 0, "deferred", "nan", 0, "verify"),           # held ...
+            (20, 2, 0, "deferred", "nan", 0, "verify"),
+            (30, 3, 1, "accepted", 0.05, 1, "verify"),
+            (10, 1, 1, "accepted", "nan", 1, "release"),           # ... released: accepted
+            (20, 2, 0, "unconfirmed", "nan", 1, "drop"),           # ... dropped
+            (40, 4, 1, "accepted", 0.1, 1, "verify"),
+            (40, 4, 0, "revoked", "nan", 1, "revoke"),             # accepted, then revoked
+            (50, 5, 1, "accepted", 0.02, 1, "release")]            # rover_replay's one-row form
+    status, err = run(capsys, "--verdicts", node_log(tmp_path, rows), "--labels", c)
+    assert status == 0, err
+    assert "5 labelled candidates (3 true, 2 false)" in run.out
+    assert "TP 3 FP 0 TN 2 FN 0" in run.out
+    # a held candidate whose final verdict never came (the log ends before the decision): not
+    # accepted, as the run never used it, and said so
+    v = node_log(tmp_path, rows[:3] + rows[4:])
+    status, err = run(capsys, "--verdicts", v, "--labels", c)
+    assert (status, len(err)) == (0, 1), err
+    assert err[0].startswith(f"evaluate.py: warning: {v}:2: 1 candidate(s) still held when the log ends (the first: "
+                             f"loop 10 -> 1"), err
+    assert "scored as not accepted" in err[0]
+    assert "TP 2 FP 0 TN 2 FN 1" in run.out
+    status, err = run(capsys, "--verdicts", node_log(tmp_path, rows[:1] + [(10, 1, 0, "accepted", 1, 1, "keep")]),
+                      "--labels", c)
+    assert status == 2 and "decision 'keep' is not one of verify, release, drop, revoke" in err[0]
+
+
+def test_metrics_json_is_strict_json(tmp_path, capsys):
+    # Only true loops: AP and MR are undefined; nothing accepted would make precision undefined.
+    import json
+    c = labels(tmp_path, [(10, 1, 1), (20, 2, 1)])
+    out = tmp_path / "eval"
+    status, err = run(capsys, "--verdicts", verdicts(tmp_path, [(10, 1, 0, 0.1), (20, 2, 0, 0.5)]), "--labels", c,
+                      "--out", str(out))
+    assert status == 0, err
+
+    def no_constant(name):
+        raise AssertionError(f"metrics.json holds {name}, which is not JSON")
+    m = json.loads((out / "metrics.json").read_text(), parse_constant=no_constant)
+    assert m["ap"] is None and m["mr"] is None and m["precision"] is None
+    assert m["recall"] == 0.0 and m["fn"] == 2
+    assert "AP -" in run.out and "precision -" in run.out
+
+
+@pytest.mark.parametrize("bad, why", [("nan", "x 'nan' is not finite"), ("dup", "stamp 2 repeats line 3"),
+                                      ("short", "7 values, a line of a TUM ground truth has 8 (stamp x y z qx qy qz qw)")])
+def test_ground_truth_with_nan_or_repeated_stamps_is_refused(tmp_path, capsys, good_labels, bad, why):
+    # issue 22 item 8: ground truth with NaN or duplicate rows was accepted ("SVD did not converge",
+    # or an ATE against the wrong pose).
+    rows = [f"{i} {i}.0 0 0 0 0 0 1" for i in range(1, 6)]
+    if bad == "nan":
+        rows[1] = "2 nan 0 0 0 0 0 1"
+    elif bad == "dup":
+        rows.insert(2, rows[1])
+    else:
+        rows[1] = "2 2.0 0 0 0 0 1"
+    gt = tmp_path / "gt.tum"
+    gt.write_text("# t x y z qx qy qz qw\n" + "\n".join(rows) + "\n")
+    est = tmp_path / "est.tum"
+    est.write_text("\n".join(f"{i} {i}.0 0 0.1 0 0 0 1" for i in range(1, 6)) + "\n")
+    v = verdicts(tmp_path, [(10, 1, 1, 0.1), (20, 2, 0, 0.5)])
+    status, err = run(capsys, "--verdicts", v, "--labels", good_labels, "--groundtruth", str(gt),
+                      "--trajectory", f"est={est}", "--align", "none")
+    assert (status, len(err)) == (2, 1), err
+    line = 4 if bad == "dup" else 3
+    assert err[0] == f"evaluate.py: error: {gt}:{line}: {why}" + (" (two poses at one time)" if bad == "dup" else "")

@@ -210,3 +210,20 @@ def test_simulate_exposes_the_false_candidate_distance(tmp_path):
     bad = subprocess.run(sim + ["--scene", "room", "--lookalike-distance", "2", "--out", str(tmp_path / "c")],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "mirror" in bad.stderr
+
+
+def test_replay_says_when_a_query_is_older_than_its_match(tmp_path):
+    """Issue 22 item 8: rover_replay verifies a candidate when its query keyframe arrives; a match
+    that comes later in keyframes.csv was reported as "unknown match keyframe"."""
+    tool = built_tool("rover_replay")
+    s = scenes.make_scene("room", 0.05, seed=3, n_true=2, n_false=2)
+    scenario.write(s, str(tmp_path / "scn"))
+    q, m = s.keyframes[10].index, s.keyframes[11].index
+    with open(tmp_path / "scn" / "candidates.csv", "a") as f:
+        f.write(f"{q},{m},0.1,0,0,0,0,0,1,0,40,0\n")
+    subprocess.run([tool, "--scenario", str(tmp_path / "scn"), "--out", str(tmp_path / "out"), "--quiet"],
+                   capture_output=True, check=True)
+    (row,) = [r for r in _csv(tmp_path / "out" / "verdicts.csv") if (int(r["query_index"]), int(r["match_index"])) == (q, m)]
+    assert row["reason"] == "invalid_input"
+    assert row["detail"] == (f"match keyframe {m} comes after query keyframe {q} in keyframes.csv: the match must be "
+                             f"the older keyframe"), row["detail"]

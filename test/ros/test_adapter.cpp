@@ -1012,6 +1012,63 @@ TEST_F(Adapter, HeldLoopsAreAppliedWhenReleasedRemovedWhenRevokedAndSavedOnlyWhi
   std::remove(file.c_str());
 }
 
+TEST_F(Adapter, CandidatesStillHeldWhenLoopFusionEndsGetTheirFinalVerdict) {
+  // Issue 22 item 9: a candidate still held when loop_fusion ended kept only its deferred
+  // verdict (final false): the verdict log had no final verdict for it. Now the adapter's end
+  // (finish(), from its destructor) drops it: unconfirmed, decision drop, on the topic and in
+  // the log; later loops are rejected.
+  const std::string log = tempFile("held_at_end.csv");
+  ros::param::set("~verdict_log", log);
+  std::shared_ptr<ScriptedVerifier::Script> script = std::make_shared<ScriptedVerifier::Script>();
+  script->hold = {30, 31};
+  Listener listen;
+  {
+    FakePoseGraph pg;
+    pg.use_imu = true;
+    ASSERT_TRUE(pg.rover.initializeWithVerifier(true, std::unique_ptr<LoopVerifier>(new ScriptedVerifier(script)),
+                                                "test/Scripted"));
+    ASSERT_TRUE(listen.connect());
+    for (int i = 0; i < 33; ++i) {
+      FakeKeyFrame kf;
+      kf.time_stamp = 1.0 + i;
+      kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0.0, 0.0);
+      LoopInfo info;
+      info << 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.5;
+      const Detection d{i - 28, info, 25};
+      pg.addKeyFrame(kf, i >= 30 ? &d : nullptr);
+    }
+    EXPECT_EQ(pg.rover.heldCount(), 2u);
+    ASSERT_TRUE(listen.waitFor(3, 0));
+    pg.rover.finish();  // what the destructor does; a second call (the destructor's) does nothing
+    EXPECT_EQ(pg.rover.heldCount(), 0u);
+    LoopInfo info;
+    info << 0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.5;
+    EXPECT_FALSE(pg.rover.verifyLoop(32, 3, info)) << "after the end every loop is rejected";
+  }
+  ASSERT_TRUE(listen.waitFor(6, 0));
+  ASSERT_EQ(listen.verdicts_.size(), 6u);
+  for (int i : {3, 4}) {
+    const LoopVerdict& v = listen.verdicts_[i];
+    EXPECT_EQ(v.query_index, 30 + (i - 3));
+    EXPECT_EQ(v.match_index, 2 + (i - 3));
+    EXPECT_FALSE(v.accepted);
+    EXPECT_TRUE(v.final);
+    EXPECT_EQ(v.reason, LoopVerdict::UNCONFIRMED);
+    EXPECT_EQ(v.decision, LoopVerdict::DROP);
+    EXPECT_EQ(v.inliers, 25);
+    EXPECT_TRUE(contains(v.detail, "still held when loop_fusion ended")) << v.detail;
+  }
+  EXPECT_EQ(listen.verdicts_[5].reason, LoopVerdict::INVALID_INPUT);
+  // The log (flushed when the adapter is gone): every candidate's final row.
+  const std::vector<std::string> rows = readLines(log);
+  ASSERT_EQ(rows.size(), 7u);
+  for (int i : {4, 5}) {
+    EXPECT_TRUE(contains(rows[i], ",unconfirmed,")) << rows[i];
+    EXPECT_EQ(rows[i].substr(rows[i].size() - 7), ",1,drop") << rows[i];
+  }
+  std::remove(log.c_str());
+}
+
 TEST_F(Adapter, AReleasedFirstLoopOfAnEarlierSessionShiftsThatSessionOnly) {
   // A loaded map (sequence 0), session 1 holds its first loop into the map, session 2 starts
   // before the verifier releases it. useLoop shifts session 1 into the map's frame (the
@@ -1233,10 +1290,11 @@ struct HostRun {
 
 /// Runs test/ros/adapter_host.cpp (a stand-in for the patched loop_fusion_node) as node
 /// `name`, whose private parameters the caller has set.
-HostRun runHost(const std::string& name) {
+HostRun runHost(const std::string& name, const std::string& args = "") {
   HostRun r;
   // A host that hangs (e.g. opening a FIFO) is killed after 60 s: exit code 124.
-  const std::string cmd = "timeout -k 5 60 " + std::string(ROVER_ADAPTER_HOST) + " __name:=" + name + " 2>&1";
+  const std::string cmd =
+      "timeout -k 5 60 " + std::string(ROVER_ADAPTER_HOST) + " __name:=" + name + " " + args + " 2>&1";
   FILE* p = ::popen(cmd.c_str(), "r");
   if (!p) return r;
   char buf[4096];
@@ -1248,6 +1306,26 @@ HostRun runHost(const std::string& name) {
 }
 
 }  // namespace
+
+TEST(AdapterStop, ALoopFusionThatEndsByTerminateStillLogsTheFinalVerdictOfAHeldCandidate) {
+  // Issue 22 item 9: upstream loop_fusion ends by std::terminate (its main returns with joinable
+  // threads: exit status -6 after the 's' save and after Ctrl-C); no destructor runs, so a
+  // candidate still held kept only its deferred row. The adapter's terminate handler gives it its
+  // final verdict and flushes the log before the abort.
+  const std::string log = tempFile("terminate.csv");
+  ros::param::set("/terminating_host/verdict_log", log);
+  const HostRun r = runHost("terminating_host", "--end-like-loop-fusion");
+  ros::param::del("/terminating_host/verdict_log");
+  EXPECT_TRUE(contains(r.output, "host: returning from main with a joinable thread")) << r.output;
+  EXPECT_NE(r.exit_code, 0) << "the host must end as loop_fusion does (abort)\n" << r.output;
+  const std::vector<std::string> rows = readLines(log);
+  ASSERT_EQ(rows.size(), 3u) << r.output;
+  EXPECT_TRUE(contains(rows[1], ",deferred,") && contains(rows[1], ",0,verify")) << rows[1];
+  EXPECT_TRUE(contains(rows[2], ",unconfirmed,") && contains(rows[2], "still held when loop_fusion ended") &&
+              contains(rows[2], ",1,drop"))
+      << rows[2];
+  std::remove(log.c_str());
+}
 
 TEST(AdapterStop, ValidParametersStartTheHost) {
   // The harness itself: a correct configuration gets through initialize and verifies.

@@ -3,7 +3,7 @@
 with its own parameters (node_hardening.test starts none):
 
 - a burst of verdicts (thousands of candidates timing out together) reaches a subscriber that
-  stalls: the verdict queue holds what the inbox holds;
+  stalls: the verdict queue holds at least 100000 verdicts;
 - thousands of waiting candidates: each is rejected once candidate_timeout has passed, not
   after the node has worked through O(n^2) re-checks;
 - SIGINT with a backlog: the node stops after the verification under way, gives every
