@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from . import alignment
 from . import bag as rbag
 from . import scenario as rscenario
 
@@ -212,19 +213,9 @@ def verdict_key(v):
     return rbag.stamp_key(v.query_stamp), rbag.stamp_key(v.match_stamp)
 
 
-def umeyama_se3(A, B):
-    """R, t minimising |R A + t - B| (3xN positions)."""
-    ma, mb = A.mean(axis=1, keepdims=True), B.mean(axis=1, keepdims=True)
-    U, _, Vt = np.linalg.svd((B - mb) @ (A - ma).T)
-    D = np.eye(3)
-    D[2, 2] = np.sign(np.linalg.det(U @ Vt)) or 1.0
-    R = U @ D @ Vt
-    return R, mb - R @ ma
-
-
 def ate(path, truth):
-    """SE(3)-aligned position RMSE [m] of a nav_msgs/Path against truth (by stamp); NaN if
-    fewer than 3 poses match."""
+    """SE(3)-aligned position RMSE [m] of a nav_msgs/Path against truth (by stamp), as
+    roverlib.alignment computes it; NaN if fewer than 3 poses match or they cannot be aligned."""
     est, ref = [], []
     for p in path.poses:
         T = truth.get(rbag.stamp_key(p.header.stamp))
@@ -233,9 +224,10 @@ def ate(path, truth):
             ref.append(T[:3, 3])
     if len(est) < 3:
         return float("nan")
-    A, B = np.array(est).T, np.array(ref).T
-    R, t = umeyama_se3(A, B)
-    return float(np.sqrt(np.mean(np.sum((R @ A + t - B) ** 2, axis=0))))
+    try:
+        return alignment.ate(np.array(ref).T, np.array(est).T, "se3")
+    except alignment.AlignmentError:
+        return float("nan")
 
 
 Score = collections.namedtuple("Score", "candidates accepted rejected tp fp tn fn unlabelled precision recall "
