@@ -24,6 +24,7 @@ import numpy as np
 
 from . import alignment
 from . import bag as rbag
+from . import reasons
 from . import scenario as rscenario
 
 
@@ -233,25 +234,15 @@ def ate(path, truth):
 Score = collections.namedtuple("Score", "candidates accepted rejected tp fp tn fn unlabelled precision recall "
                                         "reasons threshold verifier ate_odometry ate_pose_graph ate_estimate "
                                         "reason_labels")
-# What decided a verdict, for the summary (the reason strings of LoopVerdict.msg).
-REASON_NOTES = {
-    "accepted": "score <= threshold",
-    "innovation_above_bound": "innovation gate, no solve",
-    "score_above_threshold": "deformation score > threshold",
-    "not_converged": "trial solve did not converge",
-    "time_budget_exceeded": "trial solve out of time",
-    "no_trajectory_prior": "unconnected sequences: policy",
-    "invalid_input": "bad input",
-}
 
 
 def score(client, labels, truth):
     tp = fp = tn = fn = unlabelled = 0
-    reasons = collections.Counter()
+    by_reason = collections.Counter()
     reason_labels = collections.Counter()  # (reason, label 1 / 0 / -1) -> verdicts
     thresholds = set()
     for v in client.verdicts:
-        reasons[v.reason] += 1
+        by_reason[v.reason] += 1
         if np.isfinite(v.threshold):
             thresholds.add(round(v.threshold, 6))
         label = labels.get(verdict_key(v), -1)
@@ -268,7 +259,7 @@ def score(client, labels, truth):
     r = client.result
     return Score(len(client.verdicts), accepted, len(client.verdicts) - accepted, tp, fp, tn, fn, unlabelled,
                  tp / (tp + fp) if tp + fp else float("nan"), tp / (tp + fn) if tp + fn else float("nan"),
-                 dict(reasons), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
+                 dict(by_reason), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
                  ate(r.odometry, truth) if r else float("nan"), ate(r.pose_graph, truth) if r else float("nan"),
                  ate(r.estimate, truth) if r and r.estimate.poses else float("nan"), dict(reason_labels))
 
@@ -289,8 +280,8 @@ def reason_table(s):
     """Verdicts per reason, one column per label present (true / false / unlabelled)."""
     columns = [(lab, name) for lab, name in ((1, "true"), (0, "false"), (-1, "unlabelled"))
                if any(l == lab for _, l in s.reason_labels)]
-    order = list(REASON_NOTES) + sorted({r for r, _ in s.reason_labels} - set(REASON_NOTES))
-    rows = [(f"{r} ({REASON_NOTES[r]})" if r in REASON_NOTES else r,
+    order = list(reasons.NOTES) + sorted({r for r, _ in s.reason_labels} - set(reasons.NOTES))
+    rows = [(f"{r} ({reasons.NOTES[r]})" if r in reasons.NOTES else r,
              [s.reason_labels.get((r, lab), 0) for lab, _ in columns])
             for r in order if any(s.reason_labels.get((r, lab), 0) for lab, _ in columns)]
     width = max([len(name) + 2 for name, _ in rows] + [len("verdicts by reason")])

@@ -4,9 +4,9 @@ aligns them. Needs the venv of scripts/venv.sh.
 
 Conventions (as GV-Bench): positives are TRUE loops. A verdict's `score` is the decision
 function of the verifier with higher = more likely false, so the ranking score handed to
-scikit-learn is -score. Candidates without a finite score (verdicts not_converged,
-time_budget_exceeded, innovation_above_bound, invalid_input, no_trajectory_prior) rank last
-(+inf): rejected, and no evidence for a true loop.
+scikit-learn is -score. Candidates without a finite score (verdicts of a reason other than
+reasons.SCORED: gate, no convergence, time budget, bad input, ...) rank last (+inf): rejected,
+and no evidence for a true loop.
 
 AP = sklearn.metrics.average_precision_score(labels, -score).
 MR = maximum recall at 100 % precision = max recall over the points of
@@ -18,9 +18,7 @@ import math
 
 import numpy as np
 
-from . import alignment
-
-SCORED_REASONS = ("accepted", "score_above_threshold")
+from . import alignment, reasons
 
 
 # --- verdict logs and labels ---------------------------------------------------------------
@@ -58,7 +56,7 @@ def ranking_score(row):
         s = float(row["score"])
     except (TypeError, ValueError):
         return math.inf
-    return s if row["reason"] in SCORED_REASONS and math.isfinite(s) else math.inf
+    return s if row["reason"] in reasons.SCORED and math.isfinite(s) else math.inf
 
 
 def join(verdicts, labels):
