@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, tilted_loop_scenario
-from roverlib import bag, geometry as g, real_data, scenario, scenes
+from roverlib import bag, datasets, geometry as g, real_data, scenario, scenes
 
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
 import make_shipped_data  # noqa: E402
@@ -89,7 +89,7 @@ def test_simulate_bag_option_and_own_trajectory(tmp_path):
     any TUM pair (here EuRoC's, which --real euroc_mh01 reads too: the same scenario)."""
     est, gt = real_data.SEQUENCES["euroc_mh01"][:2]
     try:
-        est, gt = real_data.data_path(est), real_data.data_path(gt)
+        est, gt = datasets.data_path(est), datasets.data_path(gt)
     except FileNotFoundError as e:
         pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     script = os.path.join(ROOT, "scripts", "simulate.py")
