@@ -75,8 +75,9 @@ rover_build() {
   mkdir -p "$ROVER_WS/src"
   [ -e "$ROVER_WS/src/rover_loop_fusion" ] || ln -s "$ROVER_ROOT" "$ROVER_WS/src/rover_loop_fusion"
   echo "[rover] building the catkin workspace $ROVER_WS"
+  # -DROVER_WERROR=ON: our C++ builds without a warning (-std=c++14 -Wall -Wextra, CMakeLists.txt)
   (cd "$ROVER_WS" && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release \
-      -j"$(nproc)" "$@" > "$ROVER_WS/build.log" 2>&1) || {
+      -DROVER_WERROR=ON -j"$(nproc)" "$@" > "$ROVER_WS/build.log" 2>&1) || {
     tail -n 60 "$ROVER_WS/build.log"
     echo "[rover] build failed; full log: $ROVER_WS/build.log" >&2
     return 1

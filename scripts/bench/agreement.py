@@ -54,12 +54,11 @@ import numpy as np  # noqa: E402
 import poc  # noqa: E402
 import posegraph  # noqa: E402
 import real  # noqa: E402
-from roverlib import bench, methods, metrics  # noqa: E402
+from roverlib import bench, methods, metrics, reasons  # noqa: E402
 
 FAMILIES = {"poc": poc, "real": real, "posegraph": posegraph}
 PROTOCOLS = ("oracle", "sequential")  # two runs each, A and B
 COMPARISONS = ("same-state",) + PROTOCOLS
-TRIAL_REASONS = metrics.SCORED_REASONS + ("not_converged",)  # verdicts that ran a trial solve
 SHOWN = 100  # disagreements in the printed table and summary.md (disagreements.csv: every one)
 COLUMNS = [("family", "family", ""), ("comparison", "comparison", ""), ("cases", "cases", "d"),
            ("candidates", "cand", "d"), ("agree", "agree", "d"), ("agree_pct", "agree %", ".2f"),
@@ -93,7 +92,7 @@ def fields(p, verdict):
     return {f"{p}_accepted": int(verdict["accepted"]), f"{p}_reason": verdict["reason"],
             f"{p}_score": float(verdict["score"]), f"{p}_threshold": float(verdict["threshold"]),
             f"{p}_ms": float(verdict["elapsed_ms"]), f"{p}_scored": bool(np.isfinite(metrics.ranking_score(verdict))),
-            f"{p}_trial": verdict["reason"] in TRIAL_REASONS}
+            f"{p}_trial": verdict["reason"] in reasons.TRIALLED}
 
 
 def same_state(run):

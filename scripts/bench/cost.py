@@ -18,8 +18,8 @@ summary.csv (roverlib.bench.SUMMARY_COLUMNS: per row, method "rover" = one verif
 "loop_fusion_full" = loop_fusion's full solve; split "-": synthetic graphs, nothing is tuned on
 them; verify_ms_p99 empty: the tool reports median and p90, in cost.csv).
 --quick (CI): 4-DoF, 1k and 2k keyframes, span 100, 5 repeats."""
-import argparse
 import csv
+import functools
 import os
 import subprocess
 import sys
@@ -78,43 +78,53 @@ def plot(rows, path):
     metrics.save_figure(fig, path)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def arguments(ap):
     ap.add_argument("--quick", action="store_true", help="CI: 4-DoF, 1k and 2k keyframes, span 100, 5 repeats")
     ap.add_argument("--sizes", default="1000,2000,5000,10000,20000")
     ap.add_argument("--spans", default="100,1000")
     ap.add_argument("--six-dof-sizes", default="1000,2000", help="6-DoF sizes ('' for none)")
     ap.add_argument("--repeats", type=int, default=20)
-    ap.add_argument("--out", default=os.path.join(bench.RESULTS, "cost"))
-    a = ap.parse_args(argv)
+
+
+def plan(a):
+    """The (mode, keyframes, span) rows to measure, spans shorter than the graph."""
     if a.quick:
         a.sizes, a.spans, a.six_dof_sizes, a.repeats = "1000,2000", "100", "", 5
     spans = [int(s) for s in a.spans.split(",")]
-    plan = [("4dof", int(n), s) for n in a.sizes.split(",") for s in spans]
-    plan += [("6dof", int(n), s) for n in a.six_dof_sizes.split(",") if n for s in spans]
-    rows = []
-    for mode, n, span in plan:
-        if span >= n:
-            continue
-        r = measure(mode, n, span, a.repeats)
-        if mode == "4dof" and span == min(spans) and n in TARGETS:
-            r["target"] = f"<= {TARGETS[n]:g} ms: " + ("met" if r["verify_median_ms"] <= TARGETS[n] else "UNMET")
-        rows.append(r)
-        print(f"  {mode} {n} keyframes, span {span}: verify {r['verify_median_ms']:.3f} ms, "
-              f"loop_fusion {r['loop_fusion_full_ms']:.1f} ms, peak RSS {r['peak_rss_mb']:.1f} MB", flush=True)
+    rows = [("4dof", int(n), s) for n in a.sizes.split(",") for s in spans]
+    rows += [("6dof", int(n), s) for n in a.six_dof_sizes.split(",") if n for s in spans]
+    return [r for r in rows if r[2] < r[1]]
+
+
+def run_row(job):
+    """One row of the plan, measured in its own rover_benchmark_cost process; checked against
+    TARGETS where one applies (4-DoF, the shortest span)."""
+    (mode, n, span), repeats, shortest_span = job
+    r = measure(mode, n, span, repeats)
+    if mode == "4dof" and span == shortest_span and n in TARGETS:
+        r["target"] = f"<= {TARGETS[n]:g} ms: " + ("met" if r["verify_median_ms"] <= TARGETS[n] else "UNMET")
+    print(f"  {mode} {n} keyframes, span {span}: verify {r['verify_median_ms']:.3f} ms, "
+          f"loop_fusion {r['loop_fusion_full_ms']:.1f} ms, peak RSS {r['peak_rss_mb']:.1f} MB", flush=True)
+    return r
+
+
+def report(a, cases, rows):
     title = ("Cost of one verification vs loop_fusion's full optimisation of the same graph (one process per row; "
              f"median of {a.repeats} verifications)")
-    os.makedirs(a.out, exist_ok=True)
-    bench.report(rows, COLUMNS, title, a.out, "cost.csv")
     summary = []
     for r in rows:
         case = f"{r['mode']}_{r['keyframes']}kf_span{r['span']}"
         for method, ms in (("rover", r["verify_median_ms"]), ("loop_fusion_full", r["loop_fusion_full_ms"])):
             summary.append({"family": "cost", "split": "-", "case": case, "method": method, "verify_ms_p50": ms})
-    bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
-    plot(rows, os.path.join(a.out, "cost.png"))
-    print(f"wrote {a.out}/cost.csv, summary.csv, summary.md, cost.png")
-    return 0
+    return bench.FamilyReport(summary, [(title, rows, COLUMNS)], csvs={"cost.csv": rows},
+                              figures=[("cost.png", functools.partial(plot, rows))])
+
+
+def main(argv=None):
+    # one row after the other in this process (each in its own child): the numbers are times
+    return bench.run_family("cost", __doc__, run_row, report, argv, arguments=arguments, cases=plan,
+                            job=lambda row, a: (row, a.repeats, min(int(s) for s in a.spans.split(","))),
+                            shared_options=False)
 
 
 if __name__ == "__main__":

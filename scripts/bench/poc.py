@@ -21,10 +21,9 @@ of verifications that took longer and would have failed closed):
                solution of the same back end (roverlib/methods.py).
 Writes summary.csv (one row per case x method, roverlib.bench.SUMMARY_COLUMNS), cases.csv,
 summary.md, pr_oracle.png, pr_none.png, poc.png into --out."""
-import argparse
+import functools
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 
 from roverlib import bench, drift_model, methods, metrics, problem, scenario
 
@@ -103,19 +102,9 @@ def plot(rows, path):
     metrics.save_figure(fig, path)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    bench.family_arguments(ap, "poc")
-    ap.add_argument("--snapshots", type=int, default=10, help="K of the temporal ATE")
-    a = ap.parse_args(argv)
-    cases = bench.select_cases("poc", a)
-    os.makedirs(a.out, exist_ok=True)
-    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(run_case, [(c, a.out, a.snapshots, bench.decision_args(a)) for c in cases]))
+def report(a, cases, results):
     case_rows = [r for r, _, _ in results]
     summary = [x for _, rows, _ in results for x in rows]
-    bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
-    bench.write_csv(case_rows, os.path.join(a.out, "cases.csv"))
     ind, outd = bench.defaults("indoor"), bench.defaults("outdoor")
     notes = [bench.decision_note(a),
              f"split: {a.split}{' (quick)' if a.quick else ''}; cases and seeds: roverlib/splits.py",
@@ -125,18 +114,23 @@ def main(argv=None):
              f"LM back end: drift model {drift_model.INDOOR} (indoor) / {drift_model.OUTDOOR} (outdoor)",
              "P '-': nothing accepted; ATE/tATE RMSE [m], SE(3)-aligned"] + \
         [f"{c.name}: {c.notes}" for c in cases if c.notes]
-    bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
-                         ("Decisions (ROVER, sequential, shipped defaults)", case_rows, CASE_COLUMNS),
-                         ("Trajectories: ATE [m] per back end (LF = loop_fusion's, LM = gtsam LM)", case_rows,
-                          TRAJ_COLUMNS)], a.out, notes)
+    tables = [("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
+              ("Decisions (ROVER, sequential, shipped defaults)", case_rows, CASE_COLUMNS),
+              ("Trajectories: ATE [m] per back end (LF = loop_fusion's, LM = gtsam LM)", case_rows, TRAJ_COLUMNS)]
+    figures = []
     for p in ("oracle", "none"):
         panels = [(f"{r['case']} ({p})", [("ROVER score", cv[p])]) for r, _, cv in results if cv[p]["recall"].size]
         if panels:
-            metrics.plot_pr_grid(panels, os.path.join(a.out, f"pr_{p}.png"), ncols=5,
-                                 suptitle=f"Simulated scenes, precision-recall of the score, protocol {p}")
-    plot(case_rows, os.path.join(a.out, "poc.png"))
-    print(f"wrote {a.out}/summary.csv, cases.csv, summary.md, pr_oracle.png, pr_none.png, poc.png")
-    return 0
+            figures.append((f"pr_{p}.png", functools.partial(
+                metrics.plot_pr_grid, panels, ncols=5,
+                suptitle=f"Simulated scenes, precision-recall of the score, protocol {p}")))
+    figures.append(("poc.png", functools.partial(plot, case_rows)))
+    return bench.FamilyReport(summary, tables, notes, {"cases.csv": case_rows}, figures)
+
+
+def main(argv=None):
+    return bench.run_family("poc", __doc__, run_case, report, argv,
+                            job=lambda c, a: (c, a.out, a.snapshots, bench.decision_args(a)))
 
 
 if __name__ == "__main__":

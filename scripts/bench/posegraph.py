@@ -20,10 +20,9 @@ true-only solution. Reference: ground truth; parking-garage has none: gtsam LM w
 of the file. --quick (CI): two ringCity cases with 40 true loops.
 Writes summary.csv (roverlib.bench.SUMMARY_COLUMNS), cases.csv, summary.md and one PNG per
 graph into --out."""
-import argparse
+import functools
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -32,6 +31,8 @@ from roverlib import bench, g2o, methods, metrics, problem, robust, scenario
 SELECTIONS = ("rover", "pcm", "ipc", "gnc", "dcs")
 MAX_LOOPS = {"parking-garage": 100}  # others: 200
 QUICK_MAX_LOOPS = 40  # --quick (CI), every graph
+# the costliest graphs first, so that no worker is left alone with them at the end
+COST_ORDER = {"kitti_00": 0, "parking-garage": 1, "manhattan3500": 2, "ringCity": 3, "ring": 4}
 CASE_COLUMNS = [("case", "case", ""), ("true", "true", "d"), ("false", "false", "d"),
                 ("rover_reasons", "ROVER verdicts", ""), ("rover+lf:verify_ms_p50", "ROVER ms p50", ".1f"),
                 ("rover+lf:verify_ms_p99", "p99", ".1f"), ("rover_over_200ms", ">200ms", ".2f"),
@@ -117,48 +118,43 @@ def plot(rows, name, path):
     metrics.save_figure(fig, path)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    bench.family_arguments(ap, "posegraph")
-    ap.add_argument("--snapshots", type=int, default=10, help="K of the temporal ATE")
-    ap.add_argument("--max-loops", type=int, help="true loops per graph (default 200, parking-garage 100; --quick 40)")
-    a = ap.parse_args(argv)
-    cases = bench.select_cases("posegraph", a)
-    max_loops = a.max_loops or (QUICK_MAX_LOOPS if a.quick else None)
-    os.makedirs(a.out, exist_ok=True)
-    # the costliest graphs first, so that no worker is left alone with them at the end
-    cost = {"kitti_00": 0, "parking-garage": 1, "manhattan3500": 2, "ringCity": 3, "ring": 4}
-    order = sorted(range(len(cases)), key=lambda i: cost.get(cases[i].kwargs["graph"], 5))
-    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        done = dict(zip(order, pool.map(run_case, [(cases[i], a.out, a.snapshots, a.time_limit, max_loops,
-                                                    bench.decision_args(a))
-                                                   for i in order])))
-    results = [done[i] for i in range(len(cases))]
+def loops_per_graph(a):
+    """True loops per graph: --max-loops, else 40 with --quick, else None (MAX_LOOPS per graph)."""
+    return a.max_loops or (QUICK_MAX_LOOPS if a.quick else None)
+
+
+def report(a, cases, results):
     summary = [x for _, rows in results for x in rows]
-    bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
     wide = methods.wide_rows([r for r, _ in results], summary)
-    bench.write_csv(wide, os.path.join(a.out, "cases.csv"))
     params = bench.defaults("outdoor")
     graphs = list(dict.fromkeys(c.kwargs["graph"] for c in cases))
+    n = loops_per_graph(a)
     notes = [bench.decision_note(a),
              f"split: {a.split}{' (quick)' if a.quick else ''}; graphs, kinds, fractions, seeds: roverlib/splits.py",
              f"ROVER at config/rover_outdoor.yaml: {params['threshold']:g} m, gate {params['max_innovation']:g} m + "
              f"{params['max_innovation_per_metre']:g} x path; time budget and |yaw| limit lifted",
-             f"true loops per graph: at most {max_loops or 200} ({max_loops or MAX_LOOPS['parking-garage']} on "
+             f"true loops per graph: at most {n or 200} ({n or MAX_LOOPS['parking-garage']} on "
              "parking-garage), fixed-seed subsample; every method uses the files' information matrices",
              f"time limit per baseline and case: {a.time_limit:g} s",
              "P '-': nothing accepted; TP/FP/FN of PCM: its final clique; ATE/tATE RMSE [m], SE(3)-aligned; "
              "batch methods (GNC, DCS) have no tATE"] + \
-        [f"{n}: {graph_and_truth(n)[0].n} vertices, reference: {graph_and_truth(n)[2]}" for n in graphs]
-    bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
-                         ("Cases", wide, CASE_COLUMNS),
-                         ("Decisions", wide, methods.decision_columns(SELECTIONS)),
-                         ("ATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "ate")),
-                         ("tATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "tate"))], a.out, notes)
-    for name in graphs:
-        plot(wide, name, os.path.join(a.out, f"{name}.png"))
-    print(f"wrote {a.out}/summary.csv, cases.csv, summary.md, " + ", ".join(f"{n}.png" for n in graphs))
-    return 0
+        [f"{g}: {graph_and_truth(g)[0].n} vertices, reference: {graph_and_truth(g)[2]}" for g in graphs]
+    tables = [("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
+              ("Cases", wide, CASE_COLUMNS),
+              ("Decisions", wide, methods.decision_columns(SELECTIONS)),
+              ("ATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "ate")),
+              ("tATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "tate"))]
+    figures = [(f"{g}.png", functools.partial(plot, wide, g)) for g in graphs]
+    return bench.FamilyReport(summary, tables, notes, {"cases.csv": wide}, figures)
+
+
+def main(argv=None):
+    def arguments(ap):
+        ap.add_argument("--max-loops", type=int, help="true loops per graph (default 200, parking-garage 100; --quick 40)")
+    return bench.run_family("posegraph", __doc__, run_case, report, argv, arguments=arguments,
+                            job=lambda c, a: (c, a.out, a.snapshots, a.time_limit, loops_per_graph(a),
+                                              bench.decision_args(a)),
+                            order=lambda c: COST_ORDER.get(c.kwargs["graph"], 5))
 
 
 if __name__ == "__main__":

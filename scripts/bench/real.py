@@ -17,13 +17,12 @@ Per case, on the same candidates in the same order (roverlib/methods.py):
   PCM, IPC     incremental peers (roverlib/peers.py), covariances from the drift model;
   GNC, DCS     gtsam batch robust back ends, under --time-limit;
 every selection solved with loop_fusion's back end (LF) and gtsam LM, each against its own
-true-only solution; ATE and tATE by evo (SE(3)).
+true-only solution; ATE and tATE SE(3)-aligned (roverlib/metrics.py).
 Writes summary.csv (roverlib.bench.SUMMARY_COLUMNS), cases.csv, summary.md, pr_real.png,
 real.png into --out."""
-import argparse
+import functools
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 
 from roverlib import bench, drift_model, methods, metrics, problem, scenario
 
@@ -94,20 +93,9 @@ def plot(rows, path):
     metrics.save_figure(fig, path)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    bench.family_arguments(ap, "real")
-    ap.add_argument("--snapshots", type=int, default=10, help="K of the temporal ATE")
-    a = ap.parse_args(argv)
-    cases = bench.select_cases("real", a)
-    os.makedirs(a.out, exist_ok=True)
-    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        results = list(pool.map(run_case, [(c, a.out, a.snapshots, a.time_limit, bench.decision_args(a))
-                                           for c in cases]))
+def report(a, cases, results):
     summary = [x for _, rows, _ in results for x in rows]
-    bench.write_summary(summary, os.path.join(a.out, "summary.csv"))
     wide = methods.wide_rows([r for r, _, _ in results], summary)
-    bench.write_csv(wide, os.path.join(a.out, "cases.csv"))
     ind, outd = bench.defaults("indoor"), bench.defaults("outdoor")
     notes = [bench.decision_note(a),
              f"split: {a.split}{' (quick)' if a.quick else ''}; sequences and seeds: roverlib/splits.py",
@@ -118,17 +106,22 @@ def main(argv=None):
              f"time limit per baseline and case: {a.time_limit:g} s",
              "P '-': nothing accepted; TP/FP/FN of PCM: its final clique; ATE/tATE RMSE [m], SE(3)-aligned; "
              "batch methods (GNC, DCS) have no tATE"] + [f"{c.name}: {c.notes}" for c in cases]
-    bench.report_tables([("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
-                         ("Cases", wide, CASE_COLUMNS),
-                         ("Decisions", wide, methods.decision_columns(SELECTIONS)),
-                         ("ATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "ate")),
-                         ("tATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "tate"))], a.out, notes)
+    tables = [("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
+              ("Cases", wide, CASE_COLUMNS),
+              ("Decisions", wide, methods.decision_columns(SELECTIONS)),
+              ("ATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "ate")),
+              ("tATE [m]", wide, methods.trajectory_columns(("accept_all",) + SELECTIONS, "tate"))]
     panels = [(r["case"], [(p, cv[p]) for p in ("oracle", "none") if cv[p]["recall"].size]) for r, _, cv in results]
-    metrics.plot_pr_grid([p for p in panels if p[1]], os.path.join(a.out, "pr_real.png"), ncols=4,
-                         suptitle="Real drift: precision-recall of the ROVER score (positives: true loops)")
-    plot(wide, os.path.join(a.out, "real.png"))
-    print(f"wrote {a.out}/summary.csv, cases.csv, summary.md, pr_real.png, real.png")
-    return 0
+    figures = [("pr_real.png", functools.partial(
+                   metrics.plot_pr_grid, [p for p in panels if p[1]], ncols=4,
+                   suptitle="Real drift: precision-recall of the ROVER score (positives: true loops)")),
+               ("real.png", functools.partial(plot, wide))]
+    return bench.FamilyReport(summary, tables, notes, {"cases.csv": wide}, figures)
+
+
+def main(argv=None):
+    return bench.run_family("real", __doc__, run_case, report, argv,
+                            job=lambda c, a: (c, a.out, a.snapshots, a.time_limit, bench.decision_args(a)))
 
 
 if __name__ == "__main__":

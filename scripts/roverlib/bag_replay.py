@@ -22,7 +22,9 @@ import time
 
 import numpy as np
 
+from . import alignment
 from . import bag as rbag
+from . import reasons
 from . import scenario as rscenario
 
 
@@ -212,19 +214,9 @@ def verdict_key(v):
     return rbag.stamp_key(v.query_stamp), rbag.stamp_key(v.match_stamp)
 
 
-def umeyama_se3(A, B):
-    """R, t minimising |R A + t - B| (3xN positions)."""
-    ma, mb = A.mean(axis=1, keepdims=True), B.mean(axis=1, keepdims=True)
-    U, _, Vt = np.linalg.svd((B - mb) @ (A - ma).T)
-    D = np.eye(3)
-    D[2, 2] = np.sign(np.linalg.det(U @ Vt)) or 1.0
-    R = U @ D @ Vt
-    return R, mb - R @ ma
-
-
 def ate(path, truth):
-    """SE(3)-aligned position RMSE [m] of a nav_msgs/Path against truth (by stamp); NaN if
-    fewer than 3 poses match."""
+    """SE(3)-aligned position RMSE [m] of a nav_msgs/Path against truth (by stamp), as
+    roverlib.alignment computes it; NaN if fewer than 3 poses match or they cannot be aligned."""
     est, ref = [], []
     for p in path.poses:
         T = truth.get(rbag.stamp_key(p.header.stamp))
@@ -233,33 +225,24 @@ def ate(path, truth):
             ref.append(T[:3, 3])
     if len(est) < 3:
         return float("nan")
-    A, B = np.array(est).T, np.array(ref).T
-    R, t = umeyama_se3(A, B)
-    return float(np.sqrt(np.mean(np.sum((R @ A + t - B) ** 2, axis=0))))
+    try:
+        return alignment.ate(np.array(ref).T, np.array(est).T, "se3")
+    except alignment.AlignmentError:
+        return float("nan")
 
 
 Score = collections.namedtuple("Score", "candidates accepted rejected tp fp tn fn unlabelled precision recall "
                                         "reasons threshold verifier ate_odometry ate_pose_graph ate_estimate "
                                         "reason_labels")
-# What decided a verdict, for the summary (the reason strings of LoopVerdict.msg).
-REASON_NOTES = {
-    "accepted": "score <= threshold",
-    "innovation_above_bound": "innovation gate, no solve",
-    "score_above_threshold": "deformation score > threshold",
-    "not_converged": "trial solve did not converge",
-    "time_budget_exceeded": "trial solve out of time",
-    "no_trajectory_prior": "unconnected sequences: policy",
-    "invalid_input": "bad input",
-}
 
 
 def score(client, labels, truth):
     tp = fp = tn = fn = unlabelled = 0
-    reasons = collections.Counter()
+    by_reason = collections.Counter()
     reason_labels = collections.Counter()  # (reason, label 1 / 0 / -1) -> verdicts
     thresholds = set()
     for v in client.verdicts:
-        reasons[v.reason] += 1
+        by_reason[v.reason] += 1
         if np.isfinite(v.threshold):
             thresholds.add(round(v.threshold, 6))
         label = labels.get(verdict_key(v), -1)
@@ -276,7 +259,7 @@ def score(client, labels, truth):
     r = client.result
     return Score(len(client.verdicts), accepted, len(client.verdicts) - accepted, tp, fp, tn, fn, unlabelled,
                  tp / (tp + fp) if tp + fp else float("nan"), tp / (tp + fn) if tp + fn else float("nan"),
-                 dict(reasons), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
+                 dict(by_reason), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
                  ate(r.odometry, truth) if r else float("nan"), ate(r.pose_graph, truth) if r else float("nan"),
                  ate(r.estimate, truth) if r and r.estimate.poses else float("nan"), dict(reason_labels))
 
@@ -297,8 +280,8 @@ def reason_table(s):
     """Verdicts per reason, one column per label present (true / false / unlabelled)."""
     columns = [(lab, name) for lab, name in ((1, "true"), (0, "false"), (-1, "unlabelled"))
                if any(l == lab for _, l in s.reason_labels)]
-    order = list(REASON_NOTES) + sorted({r for r, _ in s.reason_labels} - set(REASON_NOTES))
-    rows = [(f"{r} ({REASON_NOTES[r]})" if r in REASON_NOTES else r,
+    order = list(reasons.NOTES) + sorted({r for r, _ in s.reason_labels} - set(reasons.NOTES))
+    rows = [(f"{r} ({reasons.NOTES[r]})" if r in reasons.NOTES else r,
              [s.reason_labels.get((r, lab), 0) for lab, _ in columns])
             for r in order if any(s.reason_labels.get((r, lab), 0) for lab, _ in columns)]
     width = max([len(name) + 2 for name, _ in rows] + [len("verdicts by reason")])

@@ -1,13 +1,17 @@
-"""Shared plumbing of the benchmark scripts: the command line every family shares, running
-rover_replay, evaluating its output directory, time-limited baselines, printing tables and
-writing CSV, and the one machine-readable summary per family (results/<family>/summary.csv)."""
+"""Shared plumbing of the benchmark scripts: the main() every family runs (run_family: the
+command line every family shares, its cases in a process pool, its tables, summary.md and the
+one machine-readable summary per family, results/<family>/summary.csv), running rover_replay,
+evaluating its output directory, time-limited baselines, printing tables and writing CSV."""
+import argparse
 import collections
 import csv
+import dataclasses
 import glob
 import os
 import subprocess
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 from . import metrics
 
@@ -40,8 +44,63 @@ def family_arguments(ap, family, jobs=True):
                          "(rover_replay --KEY VALUE; e.g. revoke_group=3); repeatable")
     ap.add_argument("--time-limit", type=float, default=600.0,
                     help="seconds per baseline (GNC, DCS, PCM, IPC) and case; a run that hits it is reported")
+    ap.add_argument("--snapshots", type=int, default=10, help="K of the temporal ATE")
     if jobs:
         ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
+
+
+@dataclasses.dataclass
+class FamilyReport:
+    """What a family's report() hands to run_family: the rows of summary.csv (SUMMARY_COLUMNS),
+    the tables of summary.md [(title, rows, columns)], printed too, the notes above them, more CSV
+    files {file name: rows} and figures [(file name, draw(path))]."""
+    summary: list
+    tables: list
+    notes: list = dataclasses.field(default_factory=list)
+    csvs: dict = dataclasses.field(default_factory=dict)
+    figures: list = dataclasses.field(default_factory=list)
+
+
+def run_family(family, doc, run_case, report, argv=None, *, arguments=None, cases=None, job=None, order=None,
+               shared_options=True):
+    """The main() of a benchmark family (scripts/bench/<family>.py); the family brings its parts:
+      arguments(ap)              its own options, after the shared ones (family_arguments; with
+                                 shared_options=False only --out)
+      cases(a)                   what to run (default: select_cases(family, a))
+      job(case, a)               run_case's argument for one case (default: the case), built here
+                                 before anything runs, so that a bad option stops the run first
+      run_case(job)              one case: in a pool of --jobs worker processes, or in this
+                                 process one after the other where the family has no --jobs
+      order(case)                sort key: which cases go to the pool first (default: as listed)
+      report(a, cases, results)  -> FamilyReport, results in the order of the cases
+    Then writes into --out: summary.csv, the report's CSV files, summary.md (its tables, printed
+    too) and its figures, and prints what it wrote. Returns 0 (main()'s exit status)."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    if shared_options:
+        family_arguments(ap, family)
+    else:
+        ap.add_argument("--out", default=os.path.join(RESULTS, family))
+    if arguments:
+        arguments(ap)
+    a = ap.parse_args(argv)
+    chosen = cases(a) if cases else select_cases(family, a)
+    jobs = [job(c, a) if job else c for c in chosen]
+    os.makedirs(a.out, exist_ok=True)
+    first = sorted(range(len(chosen)), key=lambda i: order(chosen[i])) if order else list(range(len(chosen)))
+    if getattr(a, "jobs", None):
+        with ProcessPoolExecutor(max_workers=a.jobs) as pool:
+            done = dict(zip(first, pool.map(run_case, [jobs[i] for i in first])))
+    else:
+        done = {i: run_case(jobs[i]) for i in first}
+    r = report(a, chosen, [done[i] for i in range(len(chosen))])
+    write_summary(r.summary, os.path.join(a.out, "summary.csv"))
+    for name, rows in r.csvs.items():
+        write_csv(rows, os.path.join(a.out, name))
+    report_tables(r.tables, a.out, r.notes)
+    for name, draw in r.figures:
+        draw(os.path.join(a.out, name))
+    print(f"wrote {a.out}/" + ", ".join(["summary.csv", *r.csvs, "summary.md", *(n for n, _ in r.figures)]))
+    return 0
 
 
 def select_cases(family, a):
@@ -222,13 +281,6 @@ def print_table(rows, columns, title=None, file=None):
         if j == 0:
             print("  ".join("-" * w for w in widths), file=file)
     file.flush()
-
-
-def report(rows, columns, title, out_dir, csv_name, notes=()):
-    """What a one-table family ends with: the table on stdout, rows as CSV, summary.md (title,
-    notes as a list, the table) in out_dir."""
-    write_csv(rows, os.path.join(out_dir, csv_name))
-    report_tables([(title, rows, columns)], out_dir, notes)
 
 
 def report_tables(sections, out_dir, notes=()):

@@ -29,7 +29,7 @@ from typing import List
 import numpy as np
 
 from . import geometry as g
-from . import real_data
+from . import datasets
 from .scenario import Candidate, Keyframe, Scenario
 
 OUTLIER_KINDS = ("random", "local", "grouped", "repetitive", "near")
@@ -157,23 +157,23 @@ def read(path, name=None):
 
 
 def load(name):
-    return read(real_data.data_path(GRAPHS[name]), name)
+    return read(datasets.data_path(GRAPHS[name]), name)
 
 
 def groundtruth(name, n):
     """Ground-truth poses (4x4, z = 0 for the planar graphs) of vertices 0..n-1, or None
     (parking-garage has none)."""
     if name == "manhattan3500":
-        a = np.loadtxt(real_data.data_path("posegraphs/manhattan3500_groundtruth_nodes.dat"))
+        a = np.loadtxt(datasets.data_path("posegraphs/manhattan3500_groundtruth_nodes.dat"))
         poses = [se2(*r) for r in a]
     elif name in ("ringCity", "ring"):
-        a = np.loadtxt(real_data.data_path(f"posegraphs/{name}_groundtruth_poses.txt"))
+        a = np.loadtxt(datasets.data_path(f"posegraphs/{name}_groundtruth_poses.txt"))
         by_id = {int(r[0]): se2(*r[1:4]) for r in a}
         poses = [by_id[i] for i in range(n)]
     elif name == "kitti_00":
-        # node i = row i of the KITTI ground truth, planar: x = z_cam, y = -x_cam (real_data's
+        # node i = row i of the KITTI ground truth, planar: x = z_cam, y = -x_cam (datasets'
         # z-up conversion), heading = yaw; height dropped like the 2D graph does.
-        _, kitti = real_data.load_kitti(real_data.data_path("kitti/00_groundtruth.txt"))
+        _, kitti = datasets.load_kitti(datasets.data_path("kitti/00_groundtruth.txt"))
         poses = [se2(T[0, 3], T[1, 3], g.yaw_of(T[:3, :3])) for T in kitti]
     else:
         return None

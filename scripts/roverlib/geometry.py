@@ -92,3 +92,15 @@ def yaw_only(T):
     """The pose with its rotation reduced to the yaw (ZYX): loop_fusion's 4-DoF view of a pose
     whose roll and pitch the VIO keeps."""
     return pose(rot_z(yaw_of(T[:3, :3])), T[:3, 3])
+
+
+def keyframes_by_distance(poses, min_distance, min_yaw=np.radians(15.0)):
+    """Indices of poses kept as keyframes: a new one after moving min_distance or turning
+    min_yaw (VINS selects keyframes by parallax; this is the geometric analogue)."""
+    keep = [0]
+    for i in range(1, len(poses)):
+        a, b = poses[keep[-1]], poses[i]
+        if (np.linalg.norm(b[:3, 3] - a[:3, 3]) >= min_distance or
+                abs(wrap(yaw_of(b[:3, :3]) - yaw_of(a[:3, :3]))) >= min_yaw):
+            keep.append(i)
+    return keep

@@ -1,24 +1,24 @@
 """Evaluation metrics: ranking metrics of verdicts (AP, MR, PR curves) with scikit-learn, and
-trajectory errors (ATE, temporal ATE) with evo. Needs the venv of scripts/venv.sh.
+trajectory errors (ATE, temporal ATE): evo reads and pairs the trajectories, roverlib/alignment.py
+aligns them. Needs the venv of scripts/venv.sh.
 
 Conventions (as GV-Bench): positives are TRUE loops. A verdict's `score` is the decision
 function of the verifier with higher = more likely false, so the ranking score handed to
-scikit-learn is -score. Candidates without a finite score (verdicts not_converged,
-time_budget_exceeded, innovation_above_bound, invalid_input, no_trajectory_prior) rank last
-(+inf): rejected, and no evidence for a true loop.
+scikit-learn is -score. Candidates without a finite score (verdicts of a reason other than
+reasons.SCORED: gate, no convergence, time budget, bad input, ...) rank last (+inf): rejected,
+and no evidence for a true loop.
 
 AP = sklearn.metrics.average_precision_score(labels, -score).
 MR = maximum recall at 100 % precision = max recall over the points of
      sklearn.metrics.precision_recall_curve(labels, -score) whose precision is 1.0 (0 if the
      top-ranked candidate is false; sklearn's curve always ends in (recall 0, precision 1)).
 """
-import copy
 import csv
 import math
 
 import numpy as np
 
-SCORED_REASONS = ("accepted", "score_above_threshold")
+from . import alignment, reasons
 
 
 # --- verdict logs and labels ---------------------------------------------------------------
@@ -56,7 +56,7 @@ def ranking_score(row):
         s = float(row["score"])
     except (TypeError, ValueError):
         return math.inf
-    return s if row["reason"] in SCORED_REASONS and math.isfinite(s) else math.inf
+    return s if row["reason"] in reasons.SCORED and math.isfinite(s) else math.inf
 
 
 def join(verdicts, labels):
@@ -184,20 +184,15 @@ def trajectory(stamps, positions, quats_xyzw=None):
 
 
 def ate(reference, estimate, align="se3", max_diff=0.01):
-    """ATE RMSE [m] of the positions after aligning `estimate` to `reference` (evo: stamps
-    associated within max_diff, Umeyama SE(3) / Sim(3) or no alignment). Trajectories are evo
+    """ATE RMSE [m] of the positions after aligning `estimate` to `reference`: stamps associated
+    within max_diff by evo, then roverlib.alignment.ate (Umeyama SE(3) / Sim(3) or no alignment;
+    AlignmentError where the positions cannot be aligned). Trajectories are evo
     PoseTrajectory3D or TUM file paths; neither is modified."""
-    from evo.core import metrics, sync
-    ref = read_tum(reference) if isinstance(reference, str) else copy.deepcopy(reference)
-    est = read_tum(estimate) if isinstance(estimate, str) else copy.deepcopy(estimate)
+    from evo.core import sync
+    ref = read_tum(reference) if isinstance(reference, str) else reference
+    est = read_tum(estimate) if isinstance(estimate, str) else estimate
     ref, est = sync.associate_trajectories(ref, est, max_diff=max_diff)
-    if align in ("se3", "sim3"):
-        est.align(ref, correct_scale=align == "sim3")
-    elif align != "none":
-        raise ValueError(f"unknown alignment {align}")
-    ape = metrics.APE(metrics.PoseRelation.translation_part)
-    ape.process_data((ref, est))
-    return float(ape.get_statistic(metrics.StatisticsType.rmse))
+    return alignment.ate(ref.positions_xyz.T, est.positions_xyz.T, align)
 
 
 def temporal_ate(reference, snapshots, align="se3", max_diff=0.01):
@@ -207,13 +202,12 @@ def temporal_ate(reference, snapshots, align="se3", max_diff=0.01):
     registered so far. A snapshot that cannot be aligned (its keyframes still on one line, e.g.
     the first stretch of a corridor: the rotation about that line is not determined) is left out
     of the mean."""
-    from evo.core.geometry import GeometryException
     ref = read_tum(reference) if isinstance(reference, str) else reference
     values = []
     for s in snapshots:
         try:
             values.append(ate(ref, s, align, max_diff))
-        except GeometryException:
+        except alignment.AlignmentError:
             continue
     return float(np.mean(values)) if values else float("nan")
 

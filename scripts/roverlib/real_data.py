@@ -1,20 +1,16 @@
-"""Scenarios from real trajectories in ../shared/data: keyframes from a VIO/VO estimate (real
-drift), candidates from the ground truth.
+"""Scenarios from real trajectories in ../shared/data (roverlib/datasets.py): keyframes from a
+VIO/VO estimate (real drift), candidates from the ground truth.
 
 True candidates pair keyframes that are at the same place in truth (and face the same way)
 with their ground-truth relative pose; false ones pair keyframes that are far apart in truth
 with a plausible small relative pose (what PnP on a look-alike place returns).
 """
-import os
-
 import numpy as np
 
+from . import datasets
 from . import geometry as g
 from .scenario import Candidate, Keyframe, Scenario
-from .scenes import perturb, small_pose
-
-DATA = os.environ.get("ROVER_SHARED_DATA",
-                      os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", "..", "..", "shared", "data"))
+from .scenes import candidate_pools, perturb, select_candidates, small_pose
 
 # name -> (estimate file, ground-truth file, mode, alignment, environment)
 SEQUENCES = {
@@ -27,50 +23,12 @@ SEQUENCES = {
     "kitti_09": ("kitti/09_vo_estimate.txt", "kitti/09_groundtruth.txt", "6dof", "se3", "outdoor"),
 }
 
-# KITTI camera frame (x right, y down, z forward) -> z-up, x-forward frame.
-_KITTI = g.pose(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]))
-
-
-def data_path(rel):
-    p = os.path.normpath(os.path.join(DATA, rel))
-    if not os.path.exists(p):
-        raise FileNotFoundError(f"{p} not found: the real data is read from ../shared/data "
-                                f"(or set ROVER_SHARED_DATA)")
-    return p
-
-
-def load_tum(path):
-    a = np.loadtxt(path, comments="#")
-    return a[:, 0], [g.pose_from_tq(r[1:4], r[4:8]) for r in a]
-
-
-def load_kitti(path, dt=0.1):
-    a = np.loadtxt(path)
-    poses = []
-    for r in a:
-        T = g.pose(r.reshape(3, 4)[:, :3], r.reshape(3, 4)[:, 3])
-        poses.append(_KITTI @ T @ g.inv(_KITTI))
-    return np.arange(len(poses)) * dt, poses
-
-
 def associate(t_est, t_gt, tol):
     """Index into t_gt of the nearest stamp for each t_est, -1 where none is within tol."""
     j = np.clip(np.searchsorted(t_gt, t_est), 1, len(t_gt) - 1)
     left = np.abs(t_gt[j - 1] - t_est) < np.abs(t_gt[j] - t_est)
     j = np.where(left, j - 1, j)
     return np.where(np.abs(t_gt[j] - t_est) <= tol, j, -1)
-
-
-def keyframes_by_distance(poses, min_distance, min_yaw=np.radians(15.0)):
-    """Indices of poses kept as keyframes: a new one after moving min_distance or turning
-    min_yaw (VINS selects keyframes by parallax; this is the geometric analogue)."""
-    keep = [0]
-    for i in range(1, len(poses)):
-        a, b = poses[keep[-1]], poses[i]
-        if (np.linalg.norm(b[:3, 3] - a[:3, 3]) >= min_distance or
-                abs(g.wrap(g.yaw_of(b[:3, :3]) - g.yaw_of(a[:3, :3]))) >= min_yaw):
-            keep.append(i)
-    return keep
 
 
 LOOKALIKE_DIRECTIONS = ("lateral", "vertical", "along")
@@ -110,26 +68,25 @@ def make_real(name, seed=0, n_true=100, n_false=100, keyframe_distance=None, min
     revisit_radius = revisit_radius or (4.0 if outdoor else 0.5)
     false_distance = false_distance or ((10.0, 60.0) if outdoor else (3.0, 15.0))
     if name.startswith("kitti"):
-        t_est, est = load_kitti(data_path(est_rel))
-        t_gt, gt = load_kitti(data_path(gt_rel))
+        t_est, est = datasets.load_kitti(datasets.data_path(est_rel))
+        t_gt, gt = datasets.load_kitti(datasets.data_path(gt_rel))
         match = np.arange(len(est))  # one pose per frame in both
     else:
-        t_est, est = load_tum(data_path(est_rel))
-        t_gt, gt = load_tum(data_path(gt_rel))
+        t_est, est = datasets.load_tum(datasets.data_path(est_rel))
+        t_gt, gt = datasets.load_tum(datasets.data_path(gt_rel))
         match = associate(t_est, t_gt, 0.01)
         # Before initialisation the VIO reports identity poses: skip them.
         moving = np.array([np.linalg.norm(T[:3, 3]) > 1e-9 or abs(T[0, 0] - 1) > 1e-12 for T in est])
         match = np.where(moving, match, -1)
     valid = np.flatnonzero(match >= 0)
     est_v = [est[i] for i in valid]
-    keep = [valid[k] for k in keyframes_by_distance(est_v, keyframe_distance)]
+    keep = [valid[k] for k in g.keyframes_by_distance(est_v, keyframe_distance)]
     kfs = [Keyframe(k, float(t_est[i]), 1, est[i]) for k, i in enumerate(keep)]
     truth = [gt[match[i]] for i in keep]
     stamps = np.array([k.stamp for k in kfs])
     meta = {"source": f"{est_rel} + {gt_rel}", "mode": mode, "alignment": alignment,
             "environment": env, "seed": seed, "keyframe_distance": keyframe_distance}
     if lookalike:
-        from .scenes import candidate_pools, select_candidates
         lk = dict(offset=1.5, first="lateral", rows=5, early=True)
         lk.update(lookalike)
         pools = candidate_pools(truth, lookalike_twins(lk["offset"], lk["first"]), rng, min_gap=1,

@@ -29,6 +29,7 @@ try:
 except ImportError:  # the system Python (scripts/simulate.py) has no scipy: the plain scan
     cKDTree = None
 
+from . import datasets
 from . import geometry as g
 from .scenario import Candidate, Keyframe, Scenario
 
@@ -204,10 +205,9 @@ def kitti_route(rng, sequence="00", step=2.0, lane=3.5, along=3.0):
     """A real street route: the KITTI ground truth of `sequence` (../shared/data/kitti), a
     keyframe every `step` metres, flattened to the ground plane (heading kept). Look-alikes as
     in city(). The drift is simulated (make_scene's sigma), the layout and revisits are real."""
-    from . import real_data
-    _, poses = real_data.load_kitti(real_data.data_path(f"kitti/{sequence}_groundtruth.txt"))
+    _, poses = datasets.load_kitti(datasets.data_path(f"kitti/{sequence}_groundtruth.txt"))
     flat = [g.pose(g.rot_z(g.yaw_of(T[:3, :3])), [T[0, 3], T[1, 3], 0.0]) for T in poses]
-    keep = real_data.keyframes_by_distance(flat, step, min_yaw=np.radians(30.0))
+    keep = g.keyframes_by_distance(flat, step, min_yaw=np.radians(30.0))
     return Path(f"kitti_{sequence}_route", [flat[i] for i in keep], _lane_and_along_twins(lane, along), dt=0.2,
                 revisit_radius=1.5, min_gap=100)
 

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, tilted_loop_scenario
-from roverlib import bag, geometry as g, real_data, scenario, scenes
+from conftest import ROOT, shared_data, tilted_loop_scenario
+from roverlib import bag, datasets, geometry as g, real_data, scenario, scenes
 
 sys.path.insert(0, os.path.join(ROOT, "scripts"))
 import make_shipped_data  # noqa: E402
@@ -88,10 +88,8 @@ def test_simulate_bag_option_and_own_trajectory(tmp_path):
     """simulate.py --bag writes the bag from the files it wrote; --estimate/--groundtruth takes
     any TUM pair (here EuRoC's, which --real euroc_mh01 reads too: the same scenario)."""
     est, gt = real_data.SEQUENCES["euroc_mh01"][:2]
-    try:
-        est, gt = real_data.data_path(est), real_data.data_path(gt)
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
+    with shared_data():
+        est, gt = datasets.data_path(est), datasets.data_path(gt)
     script = os.path.join(ROOT, "scripts", "simulate.py")
     common = ["--true", "5", "--false", "5", "--bag"]
     subprocess.run([sys.executable, script, "--estimate", est, "--groundtruth", gt, "--out", str(tmp_path / "own")] + common,
@@ -130,10 +128,8 @@ def _same_messages(a, b):
 
 
 def test_shipped_bags_are_what_the_committed_command_makes(tmp_path):
-    try:
+    with shared_data():
         make_shipped_data.main(["--out", str(tmp_path)])
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     for d in make_shipped_data.SHIPPED:
         shipped, made = os.path.join(ROOT, d), str(tmp_path / d)
         assert sorted(os.listdir(shipped)) == sorted(os.listdir(made)), d

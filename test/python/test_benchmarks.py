@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from conftest import built_tool, script
+from conftest import built_tool, script, shared_data
 from roverlib import bench, splits
 
 bench_cost, bench_poc, bench_posegraph, bench_real = (script(f"bench/{f}.py") for f in ("cost", "poc", "posegraph", "real"))
@@ -85,10 +85,8 @@ def test_poc_quick(tmp_path, capsys):
 
 
 def test_real_quick(tmp_path):
-    try:
+    with shared_data():
         assert bench_real.main(["--quick", "--snapshots", "3", "--out", str(tmp_path)]) == 0
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     rows = _summary(tmp_path / "summary.csv", "real")
     (case,) = {r["case"] for r in rows}
     assert case == "euroc_mh05_far"
@@ -109,10 +107,8 @@ def test_real_quick(tmp_path):
 
 
 def test_posegraph_quick(tmp_path):
-    try:
+    with shared_data():
         assert bench_posegraph.main(["--quick", "--snapshots", "3", "--jobs", "1", "--out", str(tmp_path)]) == 0
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     rows = _summary(tmp_path / "summary.csv", "posegraph")
     (case,) = {r["case"] for r in rows}
     assert case == "ringCity_near_20"
@@ -172,7 +168,8 @@ def test_agreement_quick(tmp_path):
     # gets a summary row over real candidates, and on the same graph and X (same-state) the two
     # trials decide alike: a condensed trial that moved the keyframes wrongly would not.
     agreement = script("bench/agreement.py")
-    assert agreement.main(["--quick", "--jobs", "1", "--out", str(tmp_path)]) == 0
+    with shared_data():  # its real and posegraph families
+        assert agreement.main(["--quick", "--jobs", "1", "--out", str(tmp_path)]) == 0
     with open(tmp_path / "summary.csv") as f:
         rows = {(r["family"], r["comparison"]): r for r in csv.DictReader(f)}
     for family in ("poc", "real", "posegraph"):

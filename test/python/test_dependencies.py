@@ -4,7 +4,9 @@ packages) plus that file's toolchain and hardening lists. Fails when a package.x
 has no mapping or a mapped package is not among what the set-up installs (shown on broken
 copies too), and when the generated message modules or a Python node that a launch or test
 file starts do not import in a fresh system interpreter (/usr/bin/python3, not this venv, so
-that a package from PyPI cannot stand in for a missing Debian package)."""
+that a package from PyPI cannot stand in for a missing Debian package). And every key of
+package.xml is one that was checked to be a rosdep key of ROS Noetic on Ubuntu 20.04
+(scripts/noetic-rosdep-keys.yaml)."""
 import os
 import re
 import shutil
@@ -108,6 +110,42 @@ def test_a_mapping_line_the_setup_cannot_read_fails(tmp_path):
     errors = coverage_errors(root)
     print("\n".join(errors))
     assert len(errors) == 1 and "cannot read" in errors[0] and "'nav_msgs'" in errors[0]
+
+
+NOETIC_KEYS = os.path.join("scripts", "noetic-rosdep-keys.yaml")
+
+
+def noetic_errors(root):
+    """Where package.xml and the list of keys checked against ROS Noetic on Ubuntu 20.04 differ."""
+    with open(os.path.join(root, NOETIC_KEYS)) as f:
+        checked = yaml.safe_load(f).get("keys") or {}
+    keys = package_xml_keys(root)
+    errors = [f"package.xml dependency '{k}' was not checked as a rosdep key of Noetic on focal ({NOETIC_KEYS})"
+              for k in keys if k not in checked]
+    errors += [f"{NOETIC_KEYS} lists '{k}', which package.xml does not name" for k in checked if k not in keys]
+    errors += [f"{NOETIC_KEYS}: '{k}' does not say where it was found" for k, where in checked.items()
+               if not (isinstance(where, str) and where.startswith(("noetic/distribution.yaml", "rosdep/")))]
+    return errors
+
+
+def test_every_key_was_checked_against_noetic_on_focal():
+    """Offline: package.xml names only the keys that scripts/noetic-rosdep-keys.yaml lists as
+    checked by hand in ros/rosdistro (docs/testing.md); a new key fails until it is checked."""
+    assert noetic_errors(ROOT) == []
+
+
+def test_an_unchecked_key_fails(tmp_path):
+    root = copy_of_the_package(tmp_path)
+    shutil.copy(os.path.join(ROOT, NOETIC_KEYS), root / NOETIC_KEYS)
+    xml = (root / "package.xml").read_text()
+    (root / "package.xml").write_text(xml.replace("<test_depend>rostest</test_depend>",
+                                                  "<test_depend>rostest</test_depend>\n  <exec_depend>tf2_ros</exec_depend>"))
+    keys = (root / NOETIC_KEYS).read_text()
+    (root / NOETIC_KEYS).write_text(keys.replace("  rosunit: noetic/distribution.yaml, repository ros\n", ""))
+    errors = noetic_errors(root)
+    print("\n".join(errors))
+    assert f"package.xml dependency 'tf2_ros' was not checked as a rosdep key of Noetic on focal ({NOETIC_KEYS})" in errors
+    assert f"package.xml dependency 'rosunit' was not checked as a rosdep key of Noetic on focal ({NOETIC_KEYS})" in errors
 
 
 def fresh_python(code):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import built_tool, script
-from roverlib import bench, metrics, scenario, scenes
+from roverlib import alignment, bench, metrics, scenario, scenes
 
 evaluate = script("evaluate.py")
 
@@ -116,6 +116,30 @@ def test_ate_known_values():
     assert metrics.ate(gt, scaled, "sim3") < 1e-9 and metrics.ate(gt, scaled, "se3") > 0.5
 
 
+def test_umeyama_recovers_a_known_similarity_and_refuses_a_line():
+    """roverlib.alignment, the one Python alignment (metrics.ate and the demo's summary use it)."""
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(3, 30)) * [[4.0], [3.0], [1.0]]
+    yaw = 0.7
+    R = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+    t = np.array([1.0, -2.0, 0.5])
+    Q = 1.3 * R @ P + t[:, None]
+    R_, t_, s_ = alignment.umeyama(P, Q, with_scale=True)
+    np.testing.assert_allclose(R_, R, atol=1e-9)
+    np.testing.assert_allclose(t_, t, atol=1e-9)
+    assert s_ == pytest.approx(1.3)
+    assert alignment.ate(Q, P, "sim3") < 1e-9 and alignment.ate(Q, P, "se3") > 0.1
+    # a mirrored copy is not a rotation: SE(3) cannot remove it
+    assert alignment.ate(P * [[1.0], [1.0], [-1.0]], P, "se3") > 0.1
+    line = np.outer([1.0, 0.0, 0.0], np.arange(10.0))  # on the x axis: the rotation about it is free
+    with pytest.raises(alignment.AlignmentError):
+        alignment.umeyama(line, line + 1.0)
+    with pytest.raises(alignment.AlignmentError):
+        alignment.ate(P, P[:, :5], "se3")
+    with pytest.raises(ValueError):
+        alignment.ate(P, P, "affine")
+
+
 def test_temporal_ate_is_the_mean_over_snapshots():
     p = _square()
     stamps = np.arange(len(p), dtype=float)
@@ -128,12 +152,11 @@ def test_temporal_ate_is_the_mean_over_snapshots():
 
 
 def test_temporal_ate_leaves_out_snapshots_that_cannot_be_aligned():
-    from evo.core.geometry import GeometryException
     p = _square()
     stamps = np.arange(len(p), dtype=float)
     gt = metrics.trajectory(stamps, p)
     line = metrics.trajectory(stamps[:5], p[:5])  # the first side so far: keyframes on one line
-    with pytest.raises(GeometryException):
+    with pytest.raises(alignment.AlignmentError):
         metrics.ate(gt, line, "se3")
     d = 0.1
     zz = p.copy()

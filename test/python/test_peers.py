@@ -4,6 +4,7 @@ graphs whose right answer is known, the same drift model for every method, deter
 import numpy as np
 import pytest
 
+from conftest import shared_data
 from roverlib import drift_model, g2o, metrics, peers, problem, robust, scenes
 from roverlib import geometry as g
 
@@ -124,8 +125,9 @@ def test_deadline_rejects_what_was_not_looked_at():
 
 
 def test_gnc_is_deterministic_and_baselines_keep_the_order():
-    G = g2o.load("ring")
-    gt = g2o.groundtruth("ring", G.n)
+    with shared_data():
+        G = g2o.load("ring")
+        gt = g2o.groundtruth("ring", G.n)
     out = g2o.inject_outliers(G, len(G.loops), "near", 0.2, gt, first_true_query=min(e.query for e in G.loops))
     cands = g2o.ordered_candidates(G.loops, out)
     p = problem.from_g2o(G, cands, gt)
@@ -160,9 +162,7 @@ def test_pcm_finds_the_larger_true_set_after_early_rows_of_agreeing_look_alikes(
     look-alikes and took no true loop."""
     from roverlib import splits
     (case,) = [c for c in splits.cases("real", "test") if c.name == "euroc_mh05_near_lateral"]
-    try:
+    with shared_data():
         p = problem.from_scenario(case.build(), drift_model.INDOOR)
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     d = metrics.decision_metrics(p.labels(), peers.run("pcm", p)["accepted"])
     assert d["tp"] >= 20 and d["tp"] > d["fp"], d

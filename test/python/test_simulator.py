@@ -7,14 +7,15 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import ROOT, built_tool, tilted_loop_scenario
+from conftest import ROOT, built_tool, shared_data, tilted_loop_scenario
 from roverlib import geometry as g
-from roverlib import real_data, scenario, scenes
+from roverlib import datasets, real_data, scenario, scenes
 
 
 @pytest.mark.parametrize("name", sorted(scenes.SCENES))
 def test_labels_agree_with_ground_truth(name):
-    s = scenes.make_scene(name, sigma=0.05, seed=1, n_true=30, n_false=30)
+    with shared_data():  # kitti_route reads the KITTI ground truth
+        s = scenes.make_scene(name, sigma=0.05, seed=1, n_true=30, n_false=30)
     assert s.meta["false_candidates"] == 30
     if name != "parking_deck":  # a spiral never revisits a place
         assert s.meta["true_candidates"] == 30
@@ -113,10 +114,8 @@ def _csv(path):
 
 
 def test_real_euroc_scenario():
-    try:
+    with shared_data():
         s = real_data.make_real("euroc_mh01", seed=0, n_true=20, n_false=20)
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     assert 200 < len(s.keyframes) < 1000
     assert s.meta["true_candidates"] == 20 and s.meta["false_candidates"] == 20
     for c in s.candidates:
@@ -128,7 +127,8 @@ def test_real_euroc_scenario():
 
 
 def test_kitti_is_converted_to_z_up():
-    s = real_data.make_real("kitti_09", seed=0, n_true=5, n_false=5)
+    with shared_data():
+        s = real_data.make_real("kitti_09", seed=0, n_true=5, n_false=5)
     z = np.array([T[2, 3] for T in s.truth])
     xy = np.array([T[:2, 3] for T in s.truth])
     assert np.ptp(z) < 0.2 * np.ptp(xy), "a car drives mostly in the horizontal plane"
@@ -183,10 +183,8 @@ def test_without_options_the_scenes_are_what_they_were():
 
 
 def test_real_near_look_alikes():
-    try:
+    with shared_data():
         s = real_data.make_real("euroc_mh03", 7, lookalike=dict(offset=1.5, first="lateral", rows=3))
-    except FileNotFoundError as e:
-        pytest.fail(f"../shared/data is part of the CI set-up: {e}")
     false = [c for c in s.candidates if c.label == 0]
     assert len(false) >= 15 and len(false) % 3 == 0 and s.meta["true_candidates"] > 10
     for c in false:
@@ -197,6 +195,9 @@ def test_real_near_look_alikes():
 def test_simulate_exposes_the_false_candidate_distance(tmp_path):
     import sys
     sim = [sys.executable, os.path.join(ROOT, "scripts", "simulate.py")]
+    with shared_data():  # what simulate.py --real euroc_mh01 reads
+        for rel in real_data.SEQUENCES["euroc_mh01"][:2]:
+            datasets.data_path(rel)
     subprocess.run(sim + ["--real", "euroc_mh01", "--false-distance", "1,2", "--out", str(tmp_path / "a")], check=True,
                    capture_output=True)
     s = scenario.read(str(tmp_path / "a"))
