@@ -1,0 +1,20 @@
+# The ROS-free core's sources, one list for every build of it (CMakeLists.txt's library and
+# fuzz/CMakeLists.txt's sanitized copy): a file added here is built everywhere.
+set(ROVER_CORE_SOURCES
+  types.cpp
+  alignment.cpp
+  drift.cpp
+  condensed.cpp
+  pose_graph.cpp
+  keyframe_intake.cpp
+  trial_solve.cpp
+  condensed_trial.cpp
+  graph_uncertainty.cpp
+  batch_solve.cpp
+  decision.cpp
+  decision_rule.cpp
+  held_candidates.cpp
+  parameters.cpp
+  verifier.cpp
+  verdict_csv.cpp
+)
