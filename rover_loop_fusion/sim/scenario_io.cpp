@@ -1,5 +1,7 @@
 #include "rover_loop_fusion/sim/scenario_io.h"
 
+#include <Eigen/Cholesky>
+
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -246,6 +248,47 @@ bool parseGroundTruth(Lines& text, const std::string& name, std::vector<int64_t>
                     error);
 }
 
+using StepCovariances =
+    std::vector<std::pair<int64_t, Eigen::Matrix4d>, Eigen::aligned_allocator<std::pair<int64_t, Eigen::Matrix4d>>>;
+
+bool parseStepCovariances(Lines& text, const std::string& name, StepCovariances* out, std::string* error) {
+  out->clear();
+  std::map<int64_t, size_t> seen;
+  return parseTable(text, name, "index,xx,xy,xz,xyaw,yy,yz,yyaw,zz,zyaw,yawyaw",
+                    [&](const std::vector<std::string>& f, std::string* what) {
+                      int64_t i = 0;
+                      double v[10];
+                      if (!integer(f, 0, &i, what) || !numbers(f, 1, 10, v, what)) return false;
+                      for (int j = 0; j < 10; ++j)
+                        if (!std::isfinite(v[j])) {
+                          *what = "field " + std::to_string(j + 2) + " '" + f[j + 1] + "' is not finite";
+                          return false;
+                        }
+                      Eigen::Matrix4d C;
+                      int k = 0;
+                      for (int r = 0; r < 4; ++r)
+                        for (int c = r; c < 4; ++c) C(r, c) = C(c, r) = v[k++];
+                      if (Eigen::LLT<Eigen::Matrix4d>(C).info() != Eigen::Success) {
+                        *what = "the covariance of keyframe " + f[0] + " is not positive definite";
+                        return false;
+                      }
+                      if (!seen.emplace(i, out->size() + 1).second) {
+                        *what = "keyframe " + f[0] + " has a step covariance already (data row " +
+                                std::to_string(seen[i]) + ")";
+                        return false;
+                      }
+                      out->emplace_back(i, C);
+                      return true;
+                    },
+                    error);
+}
+
+bool parseStepCovariances(const std::string& text, const std::string& name, StepCovariances* out,
+                          std::string* error) {
+  Lines lines(text);
+  return parseStepCovariances(lines, name, out, error);
+}
+
 bool parseKeyframes(const std::string& text, const std::string& name, std::vector<ScenarioKeyframe>* out,
                     std::string* error) {
   Lines lines(text);
@@ -278,13 +321,16 @@ bool loadScenario(const std::string& dir, Scenario* s, std::string* error) {
   };
   s->truth.clear();
   s->truth_index.clear();
+  s->step_covariance.clear();
   return read("keyframes.csv", false,
               [&](Lines& l, const std::string& f) { return parseKeyframes(l, f, &s->keyframes, error); }) &&
          read("candidates.csv", false,
               [&](Lines& l, const std::string& f) { return parseCandidates(l, f, &s->candidates, error); }) &&
          read("groundtruth.csv", true, [&](Lines& l, const std::string& f) {
            return parseGroundTruth(l, f, &s->truth_index, &s->truth, error);
-         });
+         }) &&
+         read("odometry.csv", true,
+              [&](Lines& l, const std::string& f) { return parseStepCovariances(l, f, &s->step_covariance, error); });
 }
 
 }  // namespace sim

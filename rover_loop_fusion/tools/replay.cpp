@@ -282,10 +282,16 @@ int main(int argc, char** argv) {
                    writeTum(base + "loop_fusion_verified" + suffix, stamps, verifier.solveLikeLoopFusion(5).poses) &&
                    writeTum(base + "loop_fusion_accept_all" + suffix, stamps, accept_all.solveLikeLoopFusion(5).poses);
   };
+  // odometry.csv: the step covariances the data carries (the uncertainty uses them instead of
+  // the drift model's).
+  std::map<int64_t, const Eigen::Matrix4d*> step_covariance;
+  for (const auto& sc : s.step_covariance) step_covariance[sc.first] = &sc.second;
   for (const sim::ScenarioKeyframe& k : s.keyframes) {
     ++handled_keyframes;
     if (--upcoming[k.index] == 0) upcoming.erase(k.index);
-    const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
+    const auto given = step_covariance.find(k.index);
+    const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q,
+                                                 given == step_covariance.end() ? nullptr : given->second);
     accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     if (!st) {
       ++refused_keyframes;

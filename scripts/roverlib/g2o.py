@@ -340,4 +340,30 @@ def to_scenario(graph, true_loops, outliers, truth=None, seed=0, meta=None):
     m = {"source": GRAPHS.get(graph.name, graph.name), "mode": "4dof" if graph.dim == 2 else "6dof",
          "true_candidates": len(true_loops), "false_candidates": len(outliers)}
     m.update(meta or {})
-    return Scenario(graph.name, kfs, cands, truth, m)
+    return Scenario(graph.name, kfs, cands, truth, m, step_covariance=step_covariances(graph))
+
+
+# A 2-D graph has no z: its steps get this variance in z [m^2] (z stays 0, so it only keeps the
+# covariance positive definite).
+PLANAR_Z_VARIANCE = 1e-6
+
+
+def step_covariances(graph):
+    """{i + 1: the covariance of odometry edge i -> i + 1} in the verifier's step order (x, y, z,
+    yaw in the frame of vertex i + 1: g2o's error is a right perturbation of the measurement),
+    from the file's information: what the verifier's uncertainty uses instead of a drift model
+    (rover_replay reads them from odometry.csv)."""
+    out = {}
+    for i, e in enumerate(graph.odometry):
+        cov = np.linalg.inv(np.asarray(e.info, dtype=float))
+        cov = 0.5 * (cov + cov.T)
+        C = np.zeros((4, 4))
+        if graph.dim == 2:  # (x, y, theta)
+            idx = [0, 1, 2]
+            C[np.ix_([0, 1, 3], [0, 1, 3])] = cov[np.ix_(idx, idx)]
+            C[2, 2] = PLANAR_Z_VARIANCE
+        else:  # (x, y, z, qx, qy, qz): the rotation block read as gtsam's g2o reader reads it
+            idx = [0, 1, 2, 5]
+            C = cov[np.ix_(idx, idx)]
+        out[i + 1] = C
+    return out

@@ -11,6 +11,7 @@ from . import geometry as g
 KEYFRAMES_HEADER = "index,stamp,sequence,x,y,z,qx,qy,qz,qw"
 CANDIDATES_HEADER = "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label"
 TRUTH_HEADER = "index,x,y,z,qx,qy,qz,qw"
+ODOMETRY_HEADER = "index,xx,xy,xz,xyaw,yy,yz,yyaw,zz,zyaw,yawyaw"
 
 
 @dataclass
@@ -44,6 +45,9 @@ class Scenario:
     candidates: List[Candidate]
     truth: Optional[List[np.ndarray]] = None  # per keyframe, same order
     meta: dict = field(default_factory=dict)  # mode, alignment, threshold hints, provenance
+    # Optional odometry.csv: keyframe index -> 4x4 covariance (x, y, z, yaw in that keyframe's
+    # frame) of the odometry step that ends at it, where the data carries one (g2o files).
+    step_covariance: Optional[dict] = None
 
     def relative_yaws(self):
         """loop_fusion's relative yaw [rad] of each candidate, in candidate order."""
@@ -71,6 +75,13 @@ def write(s: Scenario, directory: str):
         for c, yaw in sorted(zip(s.candidates, s.relative_yaws()), key=lambda e: e[0].query):
             f.write(",".join([str(c.query), str(c.match)] + [f"{v:.9f}" for v in _tq(c.T_rel)] +
                              [f"{yaw:.9f}", str(c.inliers), str(c.label)]) + "\n")
+    if s.step_covariance:
+        iu = np.triu_indices(4)
+        with open(os.path.join(directory, "odometry.csv"), "w") as f:
+            f.write(ODOMETRY_HEADER + "\n")
+            for index in sorted(s.step_covariance):
+                C = np.asarray(s.step_covariance[index], dtype=float)
+                f.write(",".join([str(index)] + [f"{v:.12g}" for v in C[iu]]) + "\n")
     if s.truth is not None:
         with open(os.path.join(directory, "groundtruth.csv"), "w") as f:
             f.write(TRUTH_HEADER + "\n")
@@ -100,4 +111,13 @@ def read(directory: str) -> Scenario:
         by_index = {int(r[0]): g.pose_from_tq([float(v) for v in r[1:4]], [float(v) for v in r[4:8]])
                     for r in _rows(gt_path, TRUTH_HEADER)}
         truth = [by_index.get(k.index) for k in kfs]
-    return Scenario(os.path.basename(os.path.normpath(directory)), kfs, cands, truth)
+    step_covariance = None
+    odo_path = os.path.join(directory, "odometry.csv")
+    if os.path.exists(odo_path):
+        step_covariance = {}
+        for r in _rows(odo_path, ODOMETRY_HEADER):
+            C = np.zeros((4, 4))
+            C[np.triu_indices(4)] = [float(v) for v in r[1:11]]
+            step_covariance[int(r[0])] = C + np.triu(C, 1).T
+    return Scenario(os.path.basename(os.path.normpath(directory)), kfs, cands, truth,
+                    step_covariance=step_covariance)
