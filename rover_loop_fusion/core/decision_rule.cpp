@@ -201,9 +201,11 @@ class RevisitRule : public MetricRule {
       decided->chain_covariance = C / calibration_.scale();
     }
     if (out.check.passed) return out;
-    // A trial that gave no answer is no evidence either way: fail closed.
-    if (out.check.reason != Reason::kInnovationAboveBound && out.check.reason != Reason::kScoreAboveThreshold)
-      return out;
+    // Held: only a candidate whose trial bent the trajectory too far for the metric threshold.
+    // The innovation gate stays a hard filter (holding what it rejects let rows of near
+    // look-alikes in on the pose graphs' tuning cases: docs/design-notes.md), and a trial that
+    // gave no answer is no evidence either way: fail closed.
+    if (out.check.reason != Reason::kScoreAboveThreshold) return out;
     if (!prior) {
       out.check.detail += "; no covariance of the relative pose (the condensed graph is singular)";
       return out;

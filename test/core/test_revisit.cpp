@@ -134,9 +134,11 @@ TEST(RevisitRule, ReleasesTheRevisitThatTheMetricTestRejectsAloneAfterDrift) {
   EXPECT_GT(revisit.true_accepted, metric.true_accepted);
   EXPECT_EQ(revisit.false_accepted, 0);
   EXPECT_LT(revisit.ate, metric.ate) << "the released revisit corrects the map";
-  for (const LoopDecision& d : revisit.decisions)
-    if (d.kind == LoopDecision::Kind::kRelease)
+  for (const LoopDecision& d : revisit.decisions) {
+    if (d.kind == LoopDecision::Kind::kRelease) {
       EXPECT_NE(d.verdict.detail.find("revisit hypothesis"), std::string::npos) << d.verdict.detail;
+    }
+  }
 }
 
 TEST(RevisitRule, DecidesNothingDifferentlyWhereTheMetricTestAcceptsEverything) {
@@ -169,12 +171,13 @@ TEST(RevisitRule, ALookAlikeRowLosesToTheTrueRevisitOfItsStretch) {
 TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
   // The true revisit is in the graph already (committed as accepted loops); a row of
   // look-alikes 1.5 m along the track of the same stretch arrives later. Held (a tiny metric
-  // threshold, revisit_reject_probability near 1), it must not be released: it contradicts the
-  // accepted loops.
+  // threshold, no innovation gate, revisit_reject_probability near 1), it must not be released:
+  // it contradicts the accepted loops.
   const sim::Scene s = sim::makeLapsScene(drifting());
   core::VerifierConfig cfg = config(core::Decision::kRevisit);
   cfg.revisit_reject_probability = 1.0 - 1e-12;
-  cfg.threshold = 0.01;  // no member passes the fast path: the row is held and judged
+  cfg.threshold = 0.01;      // no member passes the fast path ...
+  cfg.max_innovation = 0.0;  // ... and none is stopped by the innovation gate: the row is held and judged
   Verifier v(cfg);
   std::vector<core::LoopCandidate> trues;
   for (const sim::SimCandidate& c : s.candidates)
@@ -192,8 +195,11 @@ TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
   std::vector<LoopDecision> decisions;
   for (const sim::SimKeyframe& kf : s.keyframes) {
     ASSERT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
-    for (const core::LoopCandidate& t : trues)
-      if (t.query_index == kf.index) ASSERT_TRUE(v.commit(t).ok);
+    for (const core::LoopCandidate& t : trues) {
+      if (t.query_index == kf.index) {
+        ASSERT_TRUE(v.commit(t).ok);
+      }
+    }
     for (; next < row.size() && row[next].query_index == kf.index; ++next) {
       const Verdict vd = v.verify(row[next]);
       EXPECT_FALSE(vd.accepted) << vd.detail;
