@@ -193,7 +193,7 @@ void rejectRefusedCommit(Verdict* v, const Status& commit);
 struct VerifierConfig {
   /// How candidates are decided: kMetric (threshold and innovation gate in metres, below) or
   /// kChi2 (in units of drift: the fields from drift_xy on). See Decision.
-  Decision decision = Decision::kMetric;
+  Decision decision = Decision::kRevisit;
   Mode mode = Mode::kFourDof;
   Alignment alignment = Alignment::kSE3;
   /// Accept iff score <= threshold + threshold_per_metre * path_length [m], where
