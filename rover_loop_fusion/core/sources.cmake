@@ -14,7 +14,9 @@ set(ROVER_CORE_SOURCES
   decision.cpp
   decision_rule.cpp
   held_candidates.cpp
+  cycle_test.cpp
   parameters.cpp
   verifier.cpp
+  revocation.cpp
   verdict_csv.cpp
 )

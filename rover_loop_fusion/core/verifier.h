@@ -138,19 +138,13 @@ class Verifier {
   /// release the rivals that pass against the graph without them, or put everything back and
   /// drop the group.
   void settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops);
-  /// The cycle test of two loops (see consistent()): 1 consistent, 0 not, -1 unknown (the
-  /// odometry between them is not one chain). The odometry factors are the relative poses of X,
-  /// or of the VIO poses (`from_vio`: what the chain covariance describes, and what false
-  /// loops already accepted have not bent).
-  int cycleTest(const HeldCandidate& a, const HeldCandidate& b, bool from_vio = false) const;
   HeldCandidate heldFor(const LoopCandidate& c) const;
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
   void release(const HeldGroup& group);
   void drop(const HeldGroup& group, const std::string& why);
+  /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
-  /// X (or the VIO pose) of the keyframe at `position`.
-  Eigen::Isometry3d poseAt(size_t position, bool vio = false) const;
   void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
   /// What the last verify() that accepted worked out, for commit() to keep.
   struct Pending {

@@ -1,0 +1,185 @@
+// Revocation (revoke_group, core/verifier.h): a candidate rejected for contradicting the graph
+// that is inconsistent with an accepted loop of its stretch is held as a rival; a confirmed group
+// of rivals is decided against the graph without the loops it contradicts. Also what decision
+// revisit asks of the accepted loops (contradicted()).
+#include "rover_loop_fusion/core/verifier.h"
+
+#include "rover_loop_fusion/core/cycle_test.h"
+#include "rover_loop_fusion/core/decision.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <sstream>
+
+namespace rover_loop_fusion {
+namespace core {
+
+HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
+  HeldCandidate h;
+  h.candidate = c;
+  graph_.find(c.query_index, &h.query_pos);
+  graph_.find(c.match_index, &h.match_pos);
+  h.query_segment = graph_.segmentAt(h.query_pos);
+  h.match_segment = graph_.segmentAt(h.match_pos);
+  h.arrived = graph_.keyframeCount();
+  return h;
+}
+
+std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window) const {
+  const size_t first = h.query_pos > window ? h.query_pos - window : 0;
+  std::vector<LoopCandidate> out;
+  for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
+    const HeldCandidate a = heldFor(l);
+    // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
+    if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) &&
+        cycleTest(graph_, config_, rule_->driftScale(), a, h, true) == 0)
+      out.push_back(l);
+  }
+  return out;
+}
+
+bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
+  if (config_.revoke_group <= 0) return false;
+  if (reason != Reason::kInnovationAboveBound && reason != Reason::kScoreAboveThreshold &&
+      reason != Reason::kInconsistentWithDrift)
+    return false;
+  HeldCandidate h;
+  h.candidate = c;
+  h.query_pos = qpos;
+  h.match_pos = mpos;
+  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.confirm_window));
+  if (against.empty()) return false;
+  std::ostringstream s;
+  s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
+  for (size_t i = 0; i < against.size() && i < 3; ++i)
+    s << (i ? ", " : "") << against[i].query_index << "->" << against[i].match_index;
+  s << (against.size() > 3 ? ", ..." : "") << "): held as a rival until revoke_group=" << config_.revoke_group
+    << " agree";
+  *detail = s.str();
+  hold(c, qpos, mpos, HoldKind::kRival);
+  return true;
+}
+
+std::vector<LoopCandidate> Verifier::rivalTargets(const HeldGroup& group) const {
+  std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
+  for (const HeldCandidate& h : group)
+    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.confirm_window))) {
+      auto& v = votes[{l.query_index, l.match_index}];
+      v.first = l;
+      ++v.second;
+    }
+  std::vector<LoopCandidate> loops;
+  for (const auto& kv : votes)
+    if (2 * kv.second.second > group.size()) loops.push_back(kv.second.first);
+  return loops;
+}
+
+void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops) {
+  pending_.valid = false;  // the graph changes below
+  auto dropAll = [&](const std::vector<const HeldCandidate*>& hs, const std::string& why) {
+    for (const HeldCandidate* h : hs)
+      decide(LoopDecision::Kind::kDrop, h->candidate, Verdict::Reject(Reason::kUnconfirmed, h->candidate, why));
+  };
+  std::vector<const HeldCandidate*> all;
+  for (const HeldCandidate& h : group) all.push_back(&h);
+
+  std::ostringstream what;
+  what << group.size() << " rivals (loops " << group.front().candidate.query_index << "->"
+       << group.front().candidate.match_index << " .. " << group.back().candidate.query_index << "->"
+       << group.back().candidate.match_index << ") agree with each other";
+  if (loops.empty()) {
+    dropAll(all, what.str() + ", but the accepted loops they contradicted are no longer in the graph");
+    return;
+  }
+
+  // The graph without those loops, and the rivals decided again against it.
+  const std::vector<KeyframeState> saved = graph_.estimates();
+  size_t first = group.front().match_pos, newest = group.front().query_pos;
+  for (const HeldCandidate& h : group) {
+    first = std::min(first, h.match_pos);
+    newest = std::max(newest, h.query_pos);
+  }
+  for (const LoopCandidate& l : loops) {
+    graph_.removeLoop(l.query_index, l.match_index);
+    size_t m = 0;
+    if (graph_.find(l.match_index, &m)) first = std::min(first, m);
+  }
+  rule_->updateEstimate(first, newest, 0.0);
+  std::vector<const HeldCandidate*> passed, failed;
+  auto putBack = [&](const std::string& why) {
+    for (const HeldCandidate* h : passed) graph_.removeLoop(h->candidate.query_index, h->candidate.match_index);
+    for (const LoopCandidate& l : loops) graph_.addLoop(l);
+    graph_.restoreEstimates(saved);
+    dropAll(all, why);
+  };
+
+  // Which of the two fits the graph without them better, decisively. The larger group alone is
+  // no reason: a row of look-alikes can outnumber a true revisit, and after long drift the
+  // prior cannot tell them apart. The misfit of a loop: its innovation's squared Mahalanobis
+  // distance under the drift model (both decisions, 4-DoF and 6-DoF); the rivals' median must
+  // be within the chi-square gate (gate_probability: they fit at all) and lower than the loops'
+  // by lookalike_margin (2 ln of the likelihood ratio, as the look-alike test). Without a
+  // covariance nothing is revoked.
+  auto misfit = [&](const LoopCandidate& c) {
+    size_t q = 0, m = 0;
+    Eigen::Matrix4d C;
+    if (!graph_.find(c.query_index, &q) || !graph_.find(c.match_index, &m) ||
+        !graph_.relativeCovariance(m, q, rule_->driftScale(), &C))
+      return std::numeric_limits<double>::infinity();
+    return mahalanobis(graph_.innovationVector(c, q, m), C + graph_.loopCovariance());
+  };
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  std::vector<double> fit_loops, fit_rivals;
+  for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
+  for (const HeldCandidate& h : group) fit_rivals.push_back(misfit(h.candidate));
+  const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
+  const double gate = chiSquareQuantile(config_.gate_probability, 4);
+  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.lookalike_margin < misfit_loops)) {
+    std::ostringstream s;
+    s.precision(3);
+    s << what.str() << ", but they do not fit the graph without the " << loops.size()
+      << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
+      << "distance " << misfit_rivals << " vs " << misfit_loops << "; needed: within the gate " << gate
+      << " and lower by lookalike_margin " << config_.lookalike_margin << "): nothing revoked";
+    putBack(s.str());
+    return;
+  }
+
+  for (const HeldCandidate& h : group) {
+    Decided decided;
+    const bool ok = rule_->recheck(h.candidate, h.query_pos, h.match_pos, &decided) && graph_.addLoop(h.candidate).ok;
+    if (ok) rule_->adoptDecided(decided, h.query_pos, true);
+    (ok ? passed : failed).push_back(&h);
+  }
+
+  if (passed.size() >= static_cast<size_t>(config_.revoke_group) && passed.size() > loops.size()) {
+    std::ostringstream revoked;
+    revoked << what.str() << ", contradict it and pass against the graph without it (" << passed.size() << " of "
+            << group.size() << "; revoke_group=" << config_.revoke_group << ")";
+    for (const LoopCandidate& l : loops) {
+      revoked_.insert({l.query_index, l.match_index});
+      decide(LoopDecision::Kind::kRevoke, l, Verdict::Reject(Reason::kRevoked, l, revoked.str()));
+    }
+    std::ostringstream released;
+    released << what.str() << ": " << loops.size() << " accepted loop(s) they contradicted revoked ("
+             << loops.front().query_index << "->" << loops.front().match_index << (loops.size() > 1 ? ", ..." : "")
+             << ")";
+    for (const HeldCandidate* h : passed) decide(LoopDecision::Kind::kRelease, h->candidate, Verdict::Accept(h->candidate, released.str()));
+    dropAll(failed, what.str() + " and revoked the loops they contradict, but this one does not pass against the graph without them");
+    return;
+  }
+  // Not enough of them pass: the graph as it was.
+  std::ostringstream s;
+  s << what.str() << ", but only " << passed.size() << " of them pass against the graph without the "
+    << loops.size() << " accepted loop(s) they contradict (revoke_group=" << config_.revoke_group << "): nothing revoked";
+  putBack(s.str());
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion
