@@ -44,7 +44,7 @@ import os
 import sys
 
 
-from roverlib import bench, metrics  # noqa: E402
+from roverlib import bench, metrics, reasons  # noqa: E402
 
 
 class InputError(Exception):
@@ -128,7 +128,7 @@ def read_verdict_rows(path):
 
 
 def _held(row):
-    return row.get("final", "1") == "0" or row["reason"] == "deferred"
+    return row.get("final", "1") == "0" or row["reason"] == reasons.DEFERRED
 
 
 def final_verdicts(path, rows):
@@ -166,7 +166,7 @@ def final_verdicts(path, rows):
               file=sys.stderr)
         for i in undecided:
             n, r = out[i]
-            out[i] = (n, dict(r, accepted="0", reason="unconfirmed", final="1", decision="drop"))
+            out[i] = (n, dict(r, accepted="0", reason=reasons.UNCONFIRMED, final="1", decision="drop"))
     return out
 
 

@@ -56,7 +56,7 @@ def main():
     scores = [bag_replay.score(c, labels, truth) for c in clients]
     if verbose:
         print(f"[replay] verdicts of {clients[0].node} ({scores[0].verifier}):")
-        for v in sorted(clients[0].verdicts, key=lambda v: (v.query_stamp, v.match_stamp)):
+        for v in sorted(clients[0].current(), key=lambda v: (v.query_stamp, v.match_stamp)):
             print(bag_replay.verdict_line(v, labels.get(bag_replay.verdict_key(v), -1)))
     print(f"[replay] {n_kf} keyframe poses, {n_cand} loop candidates replayed from {os.path.basename(bag)}")
     print(bag_replay.summary_text(scores[0], scores[1] if baseline else None), flush=True)

@@ -118,7 +118,7 @@ std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int 
   std::string why = graph_.checkLoop(c, &qpos, &mpos);
   if (why.empty() && !graph_.connected(qpos, mpos)) why = "no trajectory prior: no trial";
   if (why.empty() && graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) why = "both in sequence 0";
-  if (why.empty() && config_.decision != Decision::kMetric) why = "decision chi2: no trial";
+  if (why.empty() && config_.decision == Decision::kChi2) why = "decision chi2: no trial";  // revisit: the metric trial first
   if (!why.empty()) {
     const Verdict v = Verdict::Reject(Reason::kInvalidInput, c, why);
     return {v, v};

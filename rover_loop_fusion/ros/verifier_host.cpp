@@ -272,18 +272,57 @@ core::Verdict VerifierHost::decide(const core::LoopCandidate& c) noexcept {
                           },
                           &why);
   if (!ok) v = rejection(c, "the verifier threw an exception: " + why);
+  if (v.deferred || v.accepted) {
+    std::lock_guard<std::mutex> lock(open_mutex_);
+    guarded("remembering a verdict", [&] {
+      const auto key = std::make_pair(c.query_index, c.match_index);
+      if (v.deferred) held_[key].push_back(v);
+      else loops_[key] = v;
+    });
+  }
   return v;
 }
 
 std::vector<core::LoopDecision> VerifierHost::takeDecisions() noexcept {
   std::vector<core::LoopDecision> out;
   if (verifier_) guarded("verifier " + type_ + ": takeDecisions (decisions lost)", [&] { out = verifier_->takeDecisions(); });
-  for (core::LoopDecision& d : out) {
-    // The final verdict of a held or committed loop, about the decision's own candidate.
-    d.verdict.query_index = d.candidate.query_index;
-    d.verdict.match_index = d.candidate.match_index;
-    d.verdict.deferred = false;
-  }
+  std::lock_guard<std::mutex> lock(open_mutex_);
+  guarded("the final verdicts of later decisions", [&] {
+    for (core::LoopDecision& d : out) {
+      // The final verdict of a held or committed loop, about the decision's own candidate: the
+      // numbers of its verdict at verify, the decision's outcome.
+      const auto key = std::make_pair(d.candidate.query_index, d.candidate.match_index);
+      core::Verdict at_verify;
+      bool found = false;
+      if (d.kind == core::LoopDecision::Kind::kRevoke) {
+        auto loop = loops_.find(key);
+        if (loop != loops_.end()) {
+          at_verify = loop->second;
+          found = true;
+          loops_.erase(loop);
+        }
+      } else {
+        auto held = held_.find(key);
+        if (held != held_.end()) {
+          at_verify = held->second.front();
+          found = true;
+          held->second.pop_front();
+          if (held->second.empty()) held_.erase(held);
+        }
+      }
+      if (found) {
+        at_verify.accepted = d.verdict.accepted;
+        at_verify.reason = d.verdict.reason;
+        at_verify.detail =
+            std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + at_verify.detail + ")";
+        d.verdict = std::move(at_verify);
+        if (d.verdict.accepted) loops_[key] = d.verdict;
+      }
+      d.verdict.query_index = d.candidate.query_index;
+      d.verdict.match_index = d.candidate.match_index;
+      d.verdict.deferred = false;
+    }
+  });
   return out;
 }
 

@@ -19,9 +19,13 @@
 #include <ros/node_handle.h>
 #include <ros/time.h>
 
+#include <deque>
 #include <functional>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace rover_loop_fusion {
@@ -143,7 +147,11 @@ class VerifierHost {
 
   /// The plugin's decisions since the last call (LoopVerifier::takeDecisions), each verdict
   /// final (not deferred) and naming the decision's candidate; empty if it threw (logged) or
-  /// no verifier runs. Call after every addKeyframe() and decide().
+  /// no verifier runs. Call after every addKeyframe() and decide(). A decision about a
+  /// candidate decide() held or accepted keeps the numbers of that verdict (score, threshold,
+  /// innovation, window, times: what verify() measured) and takes accepted and reason from the
+  /// decision, its detail "<decision>: <why> (at verify: <detail>)": the same final verdict as
+  /// rover_replay's row of the candidate.
   std::vector<core::LoopDecision> takeDecisions() noexcept;
 
   /// Logs v (INFO; WARN for invalid_input and revoked) as "<what> accepted/HELD/REJECTED/
@@ -163,6 +171,12 @@ class VerifierHost {
   VerifierPtr verifier_;
   VerdictOutput output_;
   bool output_ready_ = false;
+  /// decide()'s verdicts by (query, match): of the candidates held (in order: the same loop may
+  /// be proposed again while held) until their release or drop, and of the loops in use until
+  /// their revocation (a released loop's merged verdict replaces its deferred one).
+  std::map<std::pair<int64_t, int64_t>, std::deque<core::Verdict>> held_;
+  std::map<std::pair<int64_t, int64_t>, core::Verdict> loops_;
+  std::mutex open_mutex_;
 };
 
 }  // namespace rover_loop_fusion

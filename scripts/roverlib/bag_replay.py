@@ -39,7 +39,12 @@ class VerifierClient:
         import rospy
         from rover_loop_fusion.msg import LoopVerdict
         self.node = node.rstrip("/")
-        self.verdicts = []
+        # LoopVerdict.msg: every candidate gets one final verdict; a held one first gets a
+        # deferred verdict (final: false), a used loop may later get a revoking one.
+        self.messages = []  # every verdict message, in arrival order
+        self.verdicts = []  # the final verdict of each candidate (no revocations), in arrival order
+        self.pending = {}  # (query stamp, match stamp) -> deferred verdicts of candidates still held
+        self.revoked = set()  # keys of loops revoked after their accepting verdict
         self.result = None  # the Optimize response after play()
         self._cond = threading.Condition()
         self._sub = rospy.Subscriber(self.node + "/loop_verdicts", LoopVerdict, self._on_verdict,
@@ -47,15 +52,38 @@ class VerifierClient:
 
     def _on_verdict(self, msg):
         with self._cond:
-            self.verdicts.append(msg)
+            self.messages.append(msg)
+            key = verdict_key(msg)
+            if not msg.final:
+                self.pending.setdefault(key, []).append(msg)
+            elif msg.decision == "revoke":
+                self.revoked.add(key)
+            else:
+                if msg.decision in ("release", "drop") and self.pending.get(key):
+                    self.pending[key].pop(0)  # the held candidate this decision ends
+                    if not self.pending[key]:
+                        del self.pending[key]
+                self.verdicts.append(msg)
             self._cond.notify_all()
 
+    def current(self):
+        """What holds now for each candidate: its final verdict (accepted false if revoked since)
+        or, for a candidate still held, its deferred verdict."""
+        with self._cond:
+            return list(self.verdicts) + [v for held in self.pending.values() for v in held]
+
+    def held(self):
+        """Candidates still held (a deferred verdict, no final one yet)."""
+        with self._cond:
+            return sum(len(h) for h in self.pending.values())
+
     def wait_verdicts(self, n, timeout):
-        """Waits until at least n verdicts arrived; False on timeout."""
+        """Waits until n candidates have a verdict (final, or deferred while held); False on
+        timeout."""
         import rospy
         deadline = time.monotonic() + timeout
         with self._cond:
-            while len(self.verdicts) < n:
+            while len(self.verdicts) + sum(len(h) for h in self.pending.values()) < n:
                 left = deadline - time.monotonic()
                 if left <= 0 or rospy.is_shutdown():
                     return False
@@ -241,25 +269,29 @@ def score(client, labels, truth):
     by_reason = collections.Counter()
     reason_labels = collections.Counter()  # (reason, label 1 / 0 / -1) -> verdicts
     thresholds = set()
-    for v in client.verdicts:
-        by_reason[v.reason] += 1
+    verdicts = client.current()
+    accepted = 0
+    for v in verdicts:
+        used = v.accepted and verdict_key(v) not in client.revoked
+        accepted += used
+        reason = "revoked" if v.accepted and not used else v.reason
+        by_reason[reason] += 1
         if np.isfinite(v.threshold):
             thresholds.add(round(v.threshold, 6))
         label = labels.get(verdict_key(v), -1)
-        reason_labels[(v.reason, label)] += 1
+        reason_labels[(reason, label)] += 1
         if label == 1:
-            tp += v.accepted
-            fn += not v.accepted
+            tp += used
+            fn += not used
         elif label == 0:
-            fp += v.accepted
-            tn += not v.accepted
+            fp += used
+            tn += not used
         else:
             unlabelled += 1
-    accepted = sum(v.accepted for v in client.verdicts)
     r = client.result
-    return Score(len(client.verdicts), accepted, len(client.verdicts) - accepted, tp, fp, tn, fn, unlabelled,
+    return Score(len(verdicts), accepted, len(verdicts) - accepted, tp, fp, tn, fn, unlabelled,
                  tp / (tp + fp) if tp + fp else float("nan"), tp / (tp + fn) if tp + fn else float("nan"),
-                 dict(by_reason), sorted(thresholds), client.verdicts[0].verifier if client.verdicts else "",
+                 dict(by_reason), sorted(thresholds), verdicts[0].verifier if verdicts else "",
                  ate(r.odometry, truth) if r else float("nan"), ate(r.pose_graph, truth) if r else float("nan"),
                  ate(r.estimate, truth) if r and r.estimate.poses else float("nan"), dict(reason_labels))
 

@@ -6,7 +6,7 @@ msg/LoopVerdict.msg and the table in docs/ros-api.md against the C++ enum."""
 
 # reason -> what decided the verdict, in words; in the order the demo's summary lists them
 NOTES = {
-    "accepted": "score <= threshold",
+    "accepted": "score <= threshold, or released with its revisit",
     "innovation_above_bound": "innovation gate, no solve",
     "score_above_threshold": "deformation score > threshold",
     "not_converged": "trial solve did not converge",
@@ -16,7 +16,7 @@ NOTES = {
     "inconsistent_with_drift": "chi2: d2 above the gate",
     "lookalike_closer": "chi2: a look-alike place explains it better",
     "deferred": "held; a final verdict follows",
-    "unconfirmed": "held, then dropped",
+    "unconfirmed": "held, then dropped (revisit not confirmed)",
     "revoked": "an accepted loop removed again",
 }
 REASONS = tuple(NOTES)
@@ -25,3 +25,7 @@ REASONS = tuple(NOTES)
 SCORED = ("accepted", "score_above_threshold")
 # Verdicts that ran a trial solve (bench/agreement.py).
 TRIALLED = SCORED + ("not_converged",)
+# The two reasons of a held candidate (LoopVerdict.msg): its deferred verdict, and its final one
+# when it is dropped.
+DEFERRED = "deferred"
+UNCONFIRMED = "unconfirmed"

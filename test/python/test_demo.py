@@ -62,7 +62,9 @@ def test_demo_ends_with_the_summary_and_shows_gate_score_and_accepted_true_loops
     assert sum(sum(r.values()) for r in rows.values()) == n
     # both halves of the method, by reason (counts change with the decision rule)
     assert rows["innovation_above_bound"]["false"] > 0, summary   # stopped by the gate
-    assert rows["score_above_threshold"]["false"] > 0, summary    # passed the gate, the score tore
+    # passed the gate, the score tore: rejected at once, or (decision revisit) held and dropped
+    # as unconfirmed when its revisit's joint trial tore too
+    assert sum(rows.get(r, {}).get("false", 0) for r in ("score_above_threshold", "unconfirmed")) > 0, summary
     assert rows["accepted"]["true"] > 0, summary                  # true loops get in
     assert rows["accepted"].get("false", 0) == 0, summary         # no false loop gets in
     assert re.search(r"^  precision 1\.000, recall [01]\.\d{3} \(threshold [\d.]+ m\)$", summary, re.M), summary
