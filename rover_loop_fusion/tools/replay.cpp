@@ -3,6 +3,7 @@
 // keyframe has arrived. Writes the verdict log and the resulting trajectories.
 //
 //   rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]
+//                [--relocalisation confirm|reject|accept_unverified]
 //                [--config FILE] [--<parameter> VALUE ...] [--snapshots K]
 //                [--compare-trials N] [--quiet]
 //
@@ -14,6 +15,16 @@
 // (scenarios hold VIO poses). A value of the wrong type or out of range is an error (exit 2).
 // `rover_replay --help` lists every parameter with its unit, range and default.
 //
+// Relocalisation policy (what the hosts set, never a YAML): --relocalisation confirm (the
+// default, as the ROS product ships it: ~relocalisation in launch/*.launch), reject or
+// accept_unverified, mapped exactly as the hosts map ~relocalisation (plugins.cpp):
+// accept_without_prior = (policy == accept_unverified), confirm_without_prior = (policy ==
+// confirm). A YAML's accept_without_prior / confirm_without_prior are not used (the hosts
+// ignore them too). For A/B the two can still be set as flags, in command-line order with
+// --relocalisation; without --relocalisation before them they start from the core's defaults
+// (accept_without_prior true, confirm_without_prior false: what rover_replay ran before, i.e.
+// `--accept_without_prior` alone is the old behaviour, `--relocalisation accept_unverified` too).
+//
 // Protocols:
 //   sequential  commit what the verifier accepts (what the product does); a verdict says what
 //               was committed: an accepted loop whose commit is refused (the same loop again)
@@ -23,13 +34,23 @@
 //   none        commit nothing (every candidate scored against odometry alone).
 //
 // Output directory:
-//   verdicts.csv                    one row per candidate (same columns as ~verdict_log)
+//   verdicts.csv                    one row per candidate: the columns of ~verdict_log, then
+//                                   verified_at_keyframe (keyframes the verifier held when
+//                                   verify() was called), decided_at_keyframe (when the final
+//                                   decision came: the release, drop or revocation; for an
+//                                   immediate verdict the same as verified_at_keyframe) and
+//                                   group_first_at_keyframe (a released candidate: the
+//                                   verified_at_keyframe of the first member of the group it was
+//                                   released with; otherwise its own verified_at_keyframe)
+//   keyframe_ms.csv                 per keyframe: index, the wall-clock time of addKeyframe()
+//                                   (where held candidates are judged and released) [ms] and the
+//                                   decisions it produced
 //   odometry.tum                    the VIO keyframe poses
 //   verified.tum                    the verifier's estimate X at the end
 //   loop_fusion_verified.tum        loop_fusion's optimisation of the verified graph
 //   loop_fusion_accept_all.tum      loop_fusion's optimisation with every candidate
 //   groundtruth.tum                 (if the scenario has ground truth)
-//   trials.csv                      with --compare-trials N (decision metric): for every candidate,
+//   trials.csv                      with --compare-trials N (decision metric, revisit): for every candidate,
 //                                   before its verify(), the verdicts of the full-window trial
 //                                   and of the trial condensed above N keyframes against the same
 //                                   graph and X (Verifier::compareTrials; the agreement benchmark)
@@ -46,6 +67,8 @@
 
 #include <sys/stat.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -60,8 +83,17 @@ int usage(int code) {
   std::FILE* out = code ? stderr : stdout;
   std::fprintf(out,
                "usage: rover_replay --scenario DIR --out DIR [--protocol sequential|oracle|none]\n"
+               "                    [--relocalisation confirm|reject|accept_unverified]\n"
                "                    [--config FILE] [--<parameter> VALUE ...] [--snapshots K]\n"
                "                    [--compare-trials N] [--quiet]\n"
+               "--relocalisation: the hosts' ~relocalisation policy for candidates between sequences nothing\n"
+               "connects (default confirm, as the ROS product ships it): sets accept_without_prior and\n"
+               "confirm_without_prior as the hosts do; a YAML's values of those two are not used. For A/B\n"
+               "they can be given as flags (applied in order with --relocalisation; without it before them,\n"
+               "from the core's defaults: --accept_without_prior alone is rover_replay's old behaviour).\n"
+               "Output: verdicts.csv (the verdict log's columns, then verified_at_keyframe,\n"
+               "decided_at_keyframe, group_first_at_keyframe), keyframe_ms.csv (addKeyframe() time per\n"
+               "keyframe), TUM trajectories.\n"
                "verifier parameters (applied in order; --config FILE reads a verifier YAML such as\n"
                "config/rover_indoor.yaml; the defaults are that file's; a boolean flag alone means true):\n");
   for (const core::Parameter& p : core::verifierParameters())
@@ -75,6 +107,32 @@ bool count(const std::string& s, int* v) {
   const core::ParameterValue n = core::ParameterValue::parse(s);
   if (n.type != core::ParameterValue::Type::kNumber || !n.integral || n.number < 0 || n.number > 1e6) return false;
   *v = static_cast<int>(n.number);
+  return true;
+}
+
+/// The hosts' ~relocalisation policy as the verifier's two flags (ros/plugins.cpp does the same).
+bool applyRelocalisation(const std::string& policy, core::VerifierConfig* c) {
+  if (policy != "confirm" && policy != "reject" && policy != "accept_unverified") return false;
+  c->accept_without_prior = policy == "accept_unverified";
+  c->confirm_without_prior = policy == "confirm";
+  return true;
+}
+
+double percentileOf(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double pos = q / 100.0 * static_cast<double>(v.size() - 1);
+  const size_t lo = static_cast<size_t>(std::floor(pos)), hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+/// The first member named by a group decision's detail ("... (loops Q->M .. ...)"); false if none.
+bool groupFront(const std::string& detail, std::pair<int64_t, int64_t>* key) {
+  const size_t at = detail.find("(loops ");
+  if (at == std::string::npos) return false;
+  long long q = 0, m = 0;
+  if (std::sscanf(detail.c_str() + at, "(loops %lld->%lld", &q, &m) != 2) return false;
+  *key = std::make_pair(static_cast<int64_t>(q), static_cast<int64_t>(m));
   return true;
 }
 
@@ -102,6 +160,11 @@ bool writeTum(const std::string& path, const std::vector<double>& stamps,
 int main(int argc, char** argv) {
   std::string scenario_dir, out_dir, protocol = "sequential";
   core::VerifierConfig cfg;
+  // The relocalisation policy's two flags, applied after every other parameter (a YAML does not
+  // set them: the hosts ignore them there too). Default: the product's policy, confirm.
+  core::VerifierConfig policy;
+  std::string relocalisation = "confirm";  // "" once the two flags are set one by one
+  bool policy_given = false;
   bool quiet = false;
   int snapshots = 0;
   int compare_trials = -1;
@@ -113,7 +176,22 @@ int main(int argc, char** argv) {
     const std::string a = argv[i];
     const bool has_value = i + 1 < argc;
     const core::Parameter* p = a.compare(0, 2, "--") == 0 ? core::findParameter(a.substr(2)) : nullptr;
-    if (p) {
+    if (p && (p->name == "accept_without_prior" || p->name == "confirm_without_prior")) {
+      // A/B: set one by one; from the core's defaults unless --relocalisation came before.
+      if (!policy_given) policy = core::VerifierConfig();
+      policy_given = true;
+      relocalisation.clear();
+      const core::ParameterValue next = has_value ? core::ParameterValue::parse(argv[i + 1]) : core::ParameterValue();
+      const std::string text = next.type == core::ParameterValue::Type::kBoolean ? argv[++i] : "true";
+      std::string why;
+      if (!core::assignParameter(*p, core::ParameterValue::parse(text), &policy, &why)) return fail(a + ": " + why);
+    } else if (a == "--relocalisation") {
+      if (!has_value) return fail(a + " needs a value");
+      relocalisation = argv[++i];
+      if (!applyRelocalisation(relocalisation, &policy))
+        return fail("--relocalisation must be confirm, reject or accept_unverified (got '" + relocalisation + "')");
+      policy_given = true;
+    } else if (p) {
       std::string text;
       if (p->type == core::Parameter::Type::kBoolean) {
         // --flag alone means true; --flag true|false (any other next word is the next flag).
@@ -146,12 +224,18 @@ int main(int argc, char** argv) {
     } else if (a == "--quiet") quiet = true;
     else return fail("unknown option " + a);
   }
+  if (!policy_given) applyRelocalisation(relocalisation, &policy);
+  cfg.accept_without_prior = policy.accept_without_prior;
+  cfg.confirm_without_prior = policy.confirm_without_prior;
   if (scenario_dir.empty() || out_dir.empty()) return usage(2);
   if (protocol != "sequential" && protocol != "oracle" && protocol != "none")
     return fail("--protocol must be sequential, oracle or none (got '" + protocol + "')");
   const std::string invalid = cfg.validate();
   if (!invalid.empty()) return fail("invalid parameters: " + invalid);
-  if (!quiet) std::printf("rover_replay: %s\n", core::describe(cfg).c_str());
+  if (!quiet)
+    std::printf("rover_replay: %s; relocalisation: %s (accept_without_prior %s, confirm_without_prior %s)\n",
+                core::describe(cfg).c_str(), relocalisation.empty() ? "set by flags" : relocalisation.c_str(),
+                cfg.accept_without_prior ? "true" : "false", cfg.confirm_without_prior ? "true" : "false");
   sim::Scenario s;
   std::string error;
   if (!sim::loadScenario(scenario_dir, &s, &error)) {
@@ -164,7 +248,15 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "rover_replay: cannot write %s/verdicts.csv\n", out_dir.c_str());
     return 1;
   }
-  std::fprintf(csv, "%s\n", core::verdictCsvHeader().c_str());
+  // The verdict log's columns, then when the decision was made (docs/scenario-format.md).
+  std::fprintf(csv, "%s,verified_at_keyframe,decided_at_keyframe,group_first_at_keyframe\n",
+               core::verdictCsvHeader().c_str());
+  std::FILE* keyframe_csv = std::fopen((out_dir + "/keyframe_ms.csv").c_str(), "w");
+  if (!keyframe_csv) {
+    std::fprintf(stderr, "rover_replay: cannot write %s/keyframe_ms.csv\n", out_dir.c_str());
+    return 1;
+  }
+  std::fprintf(keyframe_csv, "index,add_keyframe_ms,decisions\n");
   std::FILE* trials_csv = nullptr;
   if (compare_trials > 0) {
     trials_csv = std::fopen((out_dir + "/trials.csv").c_str(), "w");
@@ -193,6 +285,7 @@ int main(int argc, char** argv) {
   size_t verified = 0;
   double verify_ms = 0.0;
   std::vector<double> stamps;
+  std::vector<double> add_keyframe_ms;
   std::vector<core::Pose> odometry;
   // One row per candidate, written at the end: a held candidate's row becomes its final
   // decision (released, dropped), an accepted loop's row "revoked" if a revocation comes.
@@ -202,27 +295,58 @@ int main(int argc, char** argv) {
     double query_stamp = 0.0, match_stamp = 0.0;
     int inliers = -1;
     const char* decision = "verify";  // or the later decision: release, drop, revoke
+    // Keyframes the verifier held when the candidate was verified, when its final decision
+    // came, and (released) when the first member of its released group was verified.
+    size_t verified_at = 0, decided_at = 0, group_first_at = 0;
   };
   std::vector<Row> rows;
   std::map<std::pair<int64_t, int64_t>, size_t> open_rows;  // deferred or accepted, by (query, match)
+  std::map<std::pair<int64_t, int64_t>, size_t> last_row;   // every candidate's latest row
+  size_t keyframes_held = 0;  // keyframes the verifier has accepted so far
   auto key = [](const core::LoopCandidate& c) { return std::make_pair(c.query_index, c.match_index); };
   auto takeDecisions = [&]() {
-    for (const core::LoopDecision& d : verifier.takeDecisions()) {
+    const std::vector<core::LoopDecision> decisions = verifier.takeDecisions();
+    // A group is released in one call: its decisions come in a row, with the same detail.
+    std::string group_detail;
+    std::vector<size_t> group_rows;
+    size_t group_first = 0;
+    auto closeGroup = [&]() {
+      for (size_t r : group_rows) rows[r].group_first_at = group_first;
+      group_rows.clear();
+      group_detail.clear();
+    };
+    for (const core::LoopDecision& d : decisions) {
       auto it = open_rows.find(key(d.candidate));
+      if (d.kind != core::LoopDecision::Kind::kRelease || d.verdict.detail != group_detail) closeGroup();
       if (it == open_rows.end()) continue;
-      core::Verdict& v = rows[it->second].verdict;
-      const int label = rows[it->second].label;
+      Row& row = rows[it->second];
+      core::Verdict& v = row.verdict;
+      const int label = row.label;
+      row.decided_at = keyframes_held;
+      if (d.kind == core::LoopDecision::Kind::kRelease) {
+        if (group_rows.empty()) {
+          group_detail = d.verdict.detail;
+          group_first = row.verified_at;
+          std::pair<int64_t, int64_t> front;
+          if (groupFront(d.verdict.detail, &front) && last_row.count(front))
+            group_first = std::min(group_first, rows[last_row[front]].verified_at);
+        }
+        group_first = std::min(group_first, row.verified_at);
+        group_rows.push_back(it->second);
+      }
       v.accepted = d.verdict.accepted;
       v.deferred = false;
       v.reason = d.verdict.reason;
       v.detail = std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + v.detail + ")";
-      rows[it->second].decision = core::toString(d.kind);
+      row.decision = core::toString(d.kind);
       if (!v.accepted) open_rows.erase(it);
       if (!quiet)
         std::printf("%7lld -> %7lld  label %2d  %-8s %s\n", static_cast<long long>(d.candidate.query_index),
                     static_cast<long long>(d.candidate.match_index), label, core::toString(d.kind),
                     d.verdict.detail.c_str());
     }
+    closeGroup();
+    return decisions.size();
   };
   auto handle = [&](const sim::ScenarioCandidate& sc) {
     const core::LoopCandidate& c = sc.candidate;
@@ -261,7 +385,9 @@ int main(int argc, char** argv) {
     row.query_stamp = stamp_of.count(c.query_index) ? stamp_of[c.query_index] : 0.0;
     row.match_stamp = stamp_of.count(c.match_index) ? stamp_of[c.match_index] : 0.0;
     row.inliers = c.inliers;
+    row.verified_at = row.decided_at = row.group_first_at = keyframes_held;
     rows.push_back(row);
+    last_row[key(c)] = rows.size() - 1;
     if (v.accepted || v.deferred) open_rows[key(c)] = rows.size() - 1;
     if (!quiet)
       std::printf("%7lld -> %7lld  label %2d  %-8s %-22s score %8.3f  %6.2f ms\n",
@@ -290,16 +416,21 @@ int main(int argc, char** argv) {
     ++handled_keyframes;
     if (--upcoming[k.index] == 0) upcoming.erase(k.index);
     const auto given = step_covariance.find(k.index);
+    const auto t0 = std::chrono::steady_clock::now();
     const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q,
                                                  given == step_covariance.end() ? nullptr : given->second);
+    const double add_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    add_keyframe_ms.push_back(add_ms);
     accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     if (!st) {
       ++refused_keyframes;
+      std::fprintf(keyframe_csv, "%lld,%.4f,0\n", static_cast<long long>(k.index), add_ms);
       if (!quiet) std::printf("keyframe refused: %s\n", st.message.c_str());
       continue;
     }
+    ++keyframes_held;
     if (st.warning() && !quiet) std::printf("keyframe warning: %s\n", st.message.c_str());
-    takeDecisions();
+    std::fprintf(keyframe_csv, "%lld,%.4f,%zu\n", static_cast<long long>(k.index), add_ms, takeDecisions());
     stamp_of[k.index] = k.stamp;
     stamps.push_back(k.stamp);
     odometry.push_back(k.vio);
@@ -320,16 +451,20 @@ int main(int argc, char** argv) {
     r.verdict.reason = core::Reason::kUnconfirmed;
     r.verdict.detail = "still held when the run ended (" + r.verdict.detail + ")";
     r.decision = "drop";
+    r.decided_at = keyframes_held;
   }
   for (const Row& r : rows) {
     if (r.label == 1) (r.verdict.accepted ? tp : fn)++;
     if (r.label == 0) (r.verdict.accepted ? fp : tn)++;
-    std::fprintf(csv, "%s\n", core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay",
-                                                            r.decision).c_str());
+    std::fprintf(csv, "%s,%zu,%zu,%zu\n",
+                 core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay", r.decision)
+                     .c_str(),
+                 r.verified_at, r.decided_at, r.group_first_at);
   }
   // Snapshots still due (the last keyframes were refused).
   for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);
   std::fclose(csv);
+  std::fclose(keyframe_csv);
   if (trials_csv) std::fclose(trials_csv);
 
   std::vector<core::Pose> estimate;
@@ -362,7 +497,10 @@ int main(int argc, char** argv) {
   if (tp + fp + tn + fn > 0)
     std::printf("rover_replay: TP %d FP %d TN %d FN %d  precision %s recall %s\n", tp, fp, tn, fn,
                 sim::ratioText(tp, tp + fp).c_str(), sim::ratioText(tp, tp + fn).c_str());
-  std::printf("rover_replay: mean verification %.3f ms; output in %s\n",
-              verified ? verify_ms / verified : 0.0, out_dir.c_str());
+  std::printf("rover_replay: mean verification %.3f ms; addKeyframe p50 %.3f ms, p99 %.3f ms, max %.3f ms; "
+              "output in %s\n",
+              verified ? verify_ms / verified : 0.0, percentileOf(add_keyframe_ms, 50), percentileOf(add_keyframe_ms, 99),
+              add_keyframe_ms.empty() ? 0.0 : *std::max_element(add_keyframe_ms.begin(), add_keyframe_ms.end()),
+              out_dir.c_str());
   return 0;
 }

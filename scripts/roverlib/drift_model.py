@@ -1,6 +1,7 @@
 """The one drift model of the evaluation: how uncertain odometry is, for every method that needs
 covariances where the data has none (simulated scenes and real VIO/VO runs; the g2o pose graphs
-carry their own information matrices, which every method gets instead).
+carry their own information matrices, which every method gets instead, ROVER through the
+scenario's odometry.csv).
 
 Odometry drifts by independent increments whose variance grows with the distance travelled:
 a keyframe step of length l (at least `min_step`: turning in place still drifts) gets
@@ -13,12 +14,17 @@ a keyframe step of length l (at least `min_step`: turning in place still drifts)
 A loop measurement (PnP on the matched keyframe) has its own, distance-independent noise
 `loop_sigma_t` per axis and `loop_sigma_yaw` (`loop_sigma_roll_pitch` in 6-DoF).
 
-These numbers are meant to be given to the C++ verifier too (issue 12): `as_params()` names
-them as parameters, so one set of numbers configures every method of a benchmark run.
-The values below were chosen on the tuning split only (roverlib/splits.py), from
-`python -m roverlib.drift_model` (robust per-metre drift over 5-20 m segments of the tuning
-runs: EuRoC MH_01 and MH_03 and two simulated scenes for indoor; the tuning city scenes for
-outdoor), the largest of each, rounded up.
+One source: the shipped verifier YAMLs. INDOOR and OUTDOOR are read from
+config/rover_indoor.yaml and config/rover_outdoor.yaml (drift_xy, drift_z, drift_yaw_deg,
+drift_min_step, loop_sigma, loop_sigma_yaw_deg: the C++ verifier's drift model, core/drift.h),
+so the peers (PCM, IPC, GNC, DCS) and the LM back end get the same model as ROVER. The YAMLs
+have no roll/pitch terms (the core's drift model is 4-DoF: x, y, z, yaw); those stay the
+constants ROLL_PITCH and LOOP_ROLL_PITCH below (6-DoF cases only: KITTI 09, parking-garage).
+`as_params()` gives the model back under the YAML's keys.
+
+`python -m roverlib.drift_model` prints the calibration of the tuning runs (robust per-metre
+drift over 5-20 m segments: EuRoC MH_01 and MH_03 and two simulated scenes for indoor; the
+tuning city scenes for outdoor) beside the model in use.
 """
 from dataclasses import dataclass
 
@@ -60,28 +66,54 @@ class DriftModel:
         return np.diag([rp, rp, self.loop_sigma_yaw ** 2] + [self.loop_sigma_t ** 2] * 3)
 
     def as_params(self):
-        """The model as verifier parameters (names for the YAML of the C++ drift model)."""
-        return {"drift_sigma_xy_per_sqrt_m": self.sigma_xy, "drift_sigma_z_per_sqrt_m": self.sigma_z,
-                "drift_sigma_yaw_per_sqrt_m": self.sigma_yaw,
-                "drift_sigma_roll_pitch_per_sqrt_m": self.sigma_roll_pitch,
-                "drift_min_step": self.min_step, "loop_sigma_t": self.loop_sigma_t,
-                "loop_sigma_yaw": self.loop_sigma_yaw, "loop_sigma_roll_pitch": self.loop_sigma_roll_pitch}
+        """The model as verifier parameters, under the YAML's keys (YAML_KEYS; roll/pitch has
+        none: the C++ drift model is 4-DoF)."""
+        return {"drift_xy": self.sigma_xy, "drift_z": self.sigma_z, "drift_yaw_deg": float(np.degrees(self.sigma_yaw)),
+                "drift_min_step": self.min_step, "loop_sigma": self.loop_sigma_t,
+                "loop_sigma_yaw_deg": float(np.degrees(self.loop_sigma_yaw))}
+
+    def __str__(self):
+        return (f"{self.name}: xy {self.sigma_xy:g} m/sqrt(m), z {self.sigma_z:g} m/sqrt(m), yaw "
+                f"{np.degrees(self.sigma_yaw):g} deg/sqrt(m), roll/pitch {self.sigma_roll_pitch:g} rad/sqrt(m) (6-DoF), "
+                f"min step {self.min_step:g} m, loop {self.loop_sigma_t:g} m / {np.degrees(self.loop_sigma_yaw):g} deg")
 
 
-# Indoor (VIO, 4-DoF), from `python -m roverlib.drift_model`: EuRoC MH_01/MH_03 stereo VIO
-# sigma_xy 0.018/0.026, sigma_z 0.015/0.011, sigma_yaw 0.0080/0.0060; the simulated warehouse and
-# corridor at the tuning noise sigma 0.1 (0.5 m steps) 0.075/0.070, 0.037/0.036, 0.0042/0.0041.
-# One model for all: the largest of each, rounded up (a model that underrates drift rejects true
-# loops after long stretches; one that overrates it lets near look-alikes through).
-INDOOR = DriftModel("indoor", sigma_xy=0.08, sigma_z=0.04, sigma_yaw=0.008, sigma_roll_pitch=0.004,
-                    loop_sigma_t=0.1, loop_sigma_yaw=float(np.radians(1.0)),
-                    loop_sigma_roll_pitch=float(np.radians(0.5)))
-# Outdoor (car-scale VIO/VO), same command: the tuning city block and KITTI 05 route (simulated
-# drift sigma 0.03, 2 m steps) 0.040/0.049, 0.021/0.022, 0.0024/0.0023. No real outdoor VO run is
-# on the tuning side (KITTI 09 is test), so these numbers know nothing about real VO.
-OUTDOOR = DriftModel("outdoor", sigma_xy=0.05, sigma_z=0.025, sigma_yaw=0.0025, sigma_roll_pitch=0.0025,
-                     loop_sigma_t=0.2, loop_sigma_yaw=float(np.radians(1.0)),
-                     loop_sigma_roll_pitch=float(np.radians(0.5)))
+# Roll and pitch drift [rad/sqrt(m)] (6-DoF only), which the YAMLs lack (the C++ drift model is
+# 4-DoF): the values the evaluation used before the YAMLs became the source (indoor: half the
+# yaw rate chosen then; outdoor: the outdoor yaw rate chosen then).
+ROLL_PITCH = {"indoor": 0.004, "outdoor": 0.0025}
+LOOP_ROLL_PITCH = float(np.radians(0.5))  # rad: a loop's roll/pitch noise (6-DoF only)
+# The YAML keys of the model (config/rover_<environment>.yaml, "decision: chi2" block).
+YAML_KEYS = ("drift_xy", "drift_z", "drift_yaw_deg", "drift_min_step", "loop_sigma", "loop_sigma_yaw_deg")
+
+
+def config_path(environment):
+    import os
+    root = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", ".."))
+    return os.path.join(root, "config", f"rover_{environment}.yaml")
+
+
+def from_yaml(environment, path=None):
+    """The drift model of config/rover_<environment>.yaml (or `path`): every number from the
+    YAML except roll/pitch (ROLL_PITCH, LOOP_ROLL_PITCH). A missing key is an error (the
+    shipped YAMLs document every parameter)."""
+    import yaml
+    path = path or config_path(environment)
+    with open(path) as f:
+        c = yaml.safe_load(f)
+    missing = [k for k in YAML_KEYS if k not in c]
+    if missing:
+        raise ValueError(f"{path}: no {', '.join(missing)}: the drift model is read from there")
+    return DriftModel(environment, sigma_xy=float(c["drift_xy"]), sigma_z=float(c["drift_z"]),
+                      sigma_yaw=float(np.radians(float(c["drift_yaw_deg"]))),
+                      sigma_roll_pitch=ROLL_PITCH[environment], loop_sigma_t=float(c["loop_sigma"]),
+                      loop_sigma_yaw=float(np.radians(float(c["loop_sigma_yaw_deg"]))),
+                      loop_sigma_roll_pitch=LOOP_ROLL_PITCH, min_step=float(c["drift_min_step"]))
+
+
+# What config/rover_indoor.yaml and rover_outdoor.yaml say (read when roverlib is imported).
+INDOOR = from_yaml("indoor")
+OUTDOOR = from_yaml("outdoor")
 MODELS = {"indoor": INDOOR, "outdoor": OUTDOOR}
 
 
@@ -114,15 +146,19 @@ def calibrate(runs):
 
 
 def main():
-    """Prints the calibration of every tuning run (what INDOOR/OUTDOOR were chosen from)."""
+    """Prints the calibration of every tuning run beside the model in use (the YAML's)."""
     from . import splits
     for env in ("indoor", "outdoor"):
         for case in splits.drift_calibration_cases(env):
             s = case.build()
             c = calibrate([([k.T for k in s.keyframes], s.truth)])
             print(f"{env:8s} {case.name:40s} sigma_xy {c['sigma_xy']:.4f}  sigma_z {c['sigma_z']:.4f}  "
-                  f"sigma_yaw {c['sigma_yaw']:.5f}  ({c['segments']} segments)")
-        print(f"{env:8s} chosen: {MODELS[env]}")
+                  f"sigma_yaw {c['sigma_yaw']:.5f} rad ({c['segments']} segments)")
+        m = MODELS[env]
+        print(f"{env:8s} {'in use (' + config_path(env).split('/')[-1] + ')':40s} sigma_xy {m.sigma_xy:.4f}  "
+              f"sigma_z {m.sigma_z:.4f}  sigma_yaw {m.sigma_yaw:.5f} rad; loop {m.loop_sigma_t:g} m, "
+              f"{np.degrees(m.loop_sigma_yaw):g} deg; min step {m.min_step:g} m; roll/pitch {m.sigma_roll_pitch:g} rad "
+              "(constant, 6-DoF)")
 
 
 if __name__ == "__main__":

@@ -57,7 +57,7 @@ def test_drift_model_covariance_is_what_the_drift_does():
 
 def test_one_drift_model_feeds_every_method():
     m = drift_model.INDOOR
-    assert set(m.as_params()) >= {"drift_sigma_xy_per_sqrt_m", "drift_sigma_z_per_sqrt_m", "drift_sigma_yaw_per_sqrt_m"}
+    assert set(m.as_params()) == set(drift_model.YAML_KEYS)
     C = m.step_covariance(4.0, 4)
     assert C[3, 3] == pytest.approx(m.sigma_xy ** 2 * 4.0) and C[5, 5] == pytest.approx(m.sigma_z ** 2 * 4.0)
     assert C[2, 2] == pytest.approx(m.sigma_yaw ** 2 * 4.0)
@@ -66,6 +66,29 @@ def test_one_drift_model_feeds_every_method():
     p = problem.from_scenario(s, m)
     assert all(np.allclose(e.cov, m.loop_covariance(4)) for e in p.loops)
     assert np.allclose(p.odometry[3].cov, m.step_covariance(np.linalg.norm(p.odometry[3].T[:3, 3]), 4))
+
+
+def test_the_drift_model_is_the_shipped_yamls():
+    """Issue 19 item 3: one drift model. The peers' covariances come from the verifier YAMLs'
+    drift_* and loop_sigma* (what ROVER's chi2 and revisit rules use), not from numbers of
+    their own; a changed YAML changes the model."""
+    import yaml
+    for env, m in drift_model.MODELS.items():
+        with open(drift_model.config_path(env)) as f:
+            c = yaml.safe_load(f)
+        assert {k: pytest.approx(float(c[k])) for k in drift_model.YAML_KEYS} == m.as_params(), env
+        assert m.sigma_yaw == pytest.approx(np.radians(float(c["drift_yaw_deg"])))
+        assert m.sigma_roll_pitch == drift_model.ROLL_PITCH[env], "roll/pitch: the documented constant"
+
+
+def test_a_changed_yaml_changes_the_drift_model(tmp_path):
+    text = open(drift_model.config_path("indoor")).read()
+    assert "\ndrift_xy: 0.05" in text
+    (tmp_path / "a.yaml").write_text(text.replace("\ndrift_xy: 0.05", "\ndrift_xy: 0.3"))
+    assert drift_model.from_yaml("indoor", str(tmp_path / "a.yaml")).sigma_xy == 0.3
+    (tmp_path / "b.yaml").write_text(text.replace("\nloop_sigma: ", "\n# loop_sigma: "))
+    with pytest.raises(ValueError, match="loop_sigma"):
+        drift_model.from_yaml("indoor", str(tmp_path / "b.yaml"))
 
 
 def _with_loops(p, loops):
@@ -165,4 +188,5 @@ def test_pcm_finds_the_larger_true_set_after_early_rows_of_agreeing_look_alikes(
     with shared_data():
         p = problem.from_scenario(case.build(), drift_model.INDOOR)
     d = metrics.decision_metrics(p.labels(), peers.run("pcm", p)["accepted"])
-    assert d["tp"] >= 20 and d["tp"] > d["fp"], d
+    # with the shipped YAMLs' drift model (one model for every method): 19 of 22 true, 0 false
+    assert d["tp"] >= 18 and d["tp"] > d["fp"], d
