@@ -5,7 +5,7 @@ with the full Ceres trial over [match, newest]?
 
   ./scripts/bench.sh agreement [--split test|tuning] [--quick] [--families poc,real,posegraph]
                                [--cases A,B] [--condense-min-window N] [--gate-off]
-                               [--a-args "..."] [--b-args "..."] [--decision metric|chi2]
+                               [--a-args "..."] [--b-args "..."] [--decision metric|chi2|revisit]
                                [--jobs 2] [--out results/agreement]
 
 Protocol. Each case is built as its family builds it (the family script's setup(): the same
@@ -205,7 +205,7 @@ def main(argv=None):
     ap.add_argument("--a-args", help='rover_replay flags of run A instead of "--condense_min_window 0"')
     ap.add_argument("--b-args", help='rover_replay flags of run B instead of "--condense_min_window N" '
                     '(e.g. a stand-in pair: --a-args "" --b-args "--max_iterations 49")')
-    ap.add_argument("--decision", choices=("metric", "chi2"),
+    ap.add_argument("--decision", choices=("metric", "chi2", "revisit"),
                     help="as the families' --decision (default: the YAML's; chi2 runs no trial: A and B agree)")
     ap.add_argument("--gate-off", action="store_true",
                     help="innovation gate off in A and B (bench.GATE_OFF): every candidate gets a trial")

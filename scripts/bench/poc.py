@@ -6,7 +6,8 @@ laps with the first loop after 1-2 km, a scene without true loops); roverlib/spl
 them, tuning and test.
 
   ./scripts/bench.sh poc [--split test|tuning] [--quick] [--cases A,B] [--snapshots 10]
-                         [--decision metric|chi2] [--jobs 2] [--out results/poc]
+                         [--decision metric|chi2|revisit] [--time-limit 600] [--jobs 2]
+                         [--out results/poc]
 
 Per case (rover_replay, the trial solve's wall-clock time budget lifted: ">200ms" is the share
 of verifications that took longer and would have failed closed):
@@ -15,7 +16,9 @@ of verifications that took longer and would have failed closed):
                committed, the paper's PoC setting);
   decisions    the product: sequential, at config/rover_<environment>.yaml (threshold and
                innovation gate): TP/FP/FN, precision ("-": nothing accepted), recall, counts per
-               verdict reason; accept-all beside it;
+               verdict reason; accept-all and the peers beside it on the same candidates in the
+               same order (PCM, IPC incremental; GNC, DCS gtsam batch, under --time-limit;
+               covariances from the drift model, roverlib/methods.py);
   trajectories ATE and tATE (evo, SE(3)) with loop_fusion's back end (lf) and gtsam LM with the
                indoor/outdoor drift model (roverlib/drift_model.py), each next to the true-only
                solution of the same back end (roverlib/methods.py).
@@ -26,6 +29,8 @@ import os
 import sys
 
 from roverlib import bench, drift_model, methods, metrics, problem, scenario
+
+SELECTIONS = ("rover", "pcm", "ipc", "gnc", "dcs")
 
 CASE_COLUMNS = [("case", "case", ""), ("environment", "env", ""), ("keyframes", "kf", "d"), ("true", "true", "d"),
                 ("false", "false", "d"), ("ap_oracle", "AP oracle", ".3f"), ("mr_oracle", "MR oracle", ".2f"),
@@ -51,7 +56,7 @@ def setup(case, out, decision=()):
 
 
 def run_case(job):
-    case, out, snapshots, decision = job
+    case, out, snapshots, time_limit, decision = job
     _, d, prob, rover_args = setup(case, out, decision)
     labels = os.path.join(d, "candidates.csv")
     curves = {}
@@ -63,14 +68,15 @@ def run_case(job):
         r = metrics.ranking_metrics(j["label"], j["score"])
         row[f"ap_{p}"], row[f"mr_{p}"] = r["ap"], r["mr"]
         curves[p] = r
-    info, rows = methods.evaluate(case, d, prob, rover_args, out, methods=("rover", "accept_all"), snapshots=snapshots)
+    info, rows = methods.evaluate(case, d, prob, rover_args, out, snapshots=snapshots, time_limit=time_limit)
     row.update(info)
     for r in rows:
         if r["method"].startswith("rover"):
             row.update({f"rover_{k}": r[k] for k in ("tp", "fp", "fn", "precision", "recall")})
         row[f"ate_{r['method']}"], row[f"tate_{r['method']}"] = r["ate"], r["tate"]
     row["ate_odometry"] = row.pop("ate_odometry", float("nan"))
-    print(f"  {case.name}: ROVER TP {row['rover_tp']} FP {row['rover_fp']} FN {row['rover_fn']}", flush=True)
+    print(f"  {case.name}: " + ", ".join(f"{r['method']} {r['tp']}/{r['fp']}/{r['fn']}" for r in rows
+                                         if r["method"] in ("rover+lf", "pcm+lf", "ipc+lf", "gnc", "dcs")), flush=True)
     return row, rows, curves
 
 
@@ -111,11 +117,14 @@ def report(a, cases, results):
              f"ROVER at the shipped defaults: indoor {ind['threshold']:g} m, gate {ind['max_innovation']:g} m + "
              f"{ind['max_innovation_per_metre']:g} x path; outdoor {outd['threshold']:g} m, gate "
              f"{outd['max_innovation']:g} m + {outd['max_innovation_per_metre']:g} x path; 4-DoF; time budget lifted",
-             f"LM back end: drift model {drift_model.INDOOR} (indoor) / {drift_model.OUTDOOR} (outdoor)",
+             f"PCM, IPC, GNC, DCS and the LM back end: drift model {drift_model.INDOOR} (indoor) / "
+             f"{drift_model.OUTDOOR} (outdoor); time limit per peer and case: {a.time_limit:g} s",
              "P '-': nothing accepted; ATE/tATE RMSE [m], SE(3)-aligned"] + \
         [f"{c.name}: {c.notes}" for c in cases if c.notes]
+    wide = methods.wide_rows(case_rows, summary)
     tables = [("Pooled over the cases", methods.pooled(summary), methods.POOLED_COLUMNS),
               ("Decisions (ROVER, sequential, shipped defaults)", case_rows, CASE_COLUMNS),
+              ("Decisions, every method (same candidates, same order)", wide, methods.decision_columns(SELECTIONS)),
               ("Trajectories: ATE [m] per back end (LF = loop_fusion's, LM = gtsam LM)", case_rows, TRAJ_COLUMNS)]
     figures = []
     for p in ("oracle", "none"):
@@ -130,7 +139,7 @@ def report(a, cases, results):
 
 def main(argv=None):
     return bench.run_family("poc", __doc__, run_case, report, argv,
-                            job=lambda c, a: (c, a.out, a.snapshots, bench.decision_args(a)))
+                            job=lambda c, a: (c, a.out, a.snapshots, a.time_limit, bench.decision_args(a)))
 
 
 if __name__ == "__main__":

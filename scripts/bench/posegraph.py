@@ -5,7 +5,7 @@ same graphs, candidates and order. Tuning and test graphs: roverlib/splits.py (t
 manhattan3500, ring; test ringCity, kitti_00, parking-garage).
 
   ./scripts/bench.sh posegraph [--split test|tuning] [--quick] [--cases A,B] [--max-loops N]
-                               [--snapshots 10] [--time-limit 600] [--decision metric|chi2] [--jobs 2]
+                               [--snapshots 10] [--time-limit 600] [--decision metric|chi2|revisit] [--jobs 2]
                                [--out results/posegraph]
 
 Per case (graph, outlier kind, fraction; roverlib/g2o.py says how each kind is made, seeds fixed):

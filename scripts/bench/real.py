@@ -6,7 +6,7 @@ vertically or along the heading) in rows with a row before the first true loop. 
 test sequences: roverlib/splits.py (never the same sequence on both sides).
 
   ./scripts/bench.sh real [--split test|tuning] [--quick] [--cases A,B] [--snapshots 10]
-                          [--time-limit 600] [--decision metric|chi2] [--jobs 2]
+                          [--time-limit 600] [--decision metric|chi2|revisit] [--jobs 2]
                           [--out results/real]
 
 Per case, on the same candidates in the same order (roverlib/methods.py):

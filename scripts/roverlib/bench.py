@@ -36,7 +36,7 @@ def family_arguments(ap, family, jobs=True):
     ap.add_argument("--quick", action="store_true", help="the CI subset of the split")
     ap.add_argument("--cases", help="only these case names (comma-separated)")
     ap.add_argument("--out", default=os.path.join(RESULTS, family))
-    ap.add_argument("--decision", choices=("metric", "chi2"),
+    ap.add_argument("--decision", choices=("metric", "chi2", "revisit"),
                     help="ROVER's decision mode instead of the shipped YAML's (rover_replay --decision after "
                          "--config; 6-DoF cases too: chi2 then tests x, y, z and yaw)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",

@@ -63,7 +63,8 @@ def test_poc_quick(tmp_path, capsys):
     rows = _summary(tmp_path / "summary.csv", "poc")
     cases = [c.name for c in splits.cases("poc", "test", quick=True)]
     assert sorted({r["case"] for r in rows}) == sorted(cases) and {r["split"] for r in rows} == {"test"}
-    assert {r["method"] for r in rows} == {"odometry", "rover+lf", "rover+lm", "accept_all+lf", "accept_all+lm"}
+    want = {"odometry", "gnc", "dcs"} | {f"{m}+{b}" for m in ("rover", "accept_all", "pcm", "ipc") for b in ("lf", "lm")}
+    assert {r["method"] for r in rows} == want, "the peers on the simulated scenes too (issue 19)"
     for case in cases:
         odo = _by(rows, case, "odometry")
         assert odo["precision"] == "" and int(odo["fn"]) == 40, "no decision: precision '-'"
@@ -81,7 +82,7 @@ def test_poc_quick(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Decisions" in out and "LM true-only" in out
     _pngs(tmp_path, ["pr_oracle.png", "pr_none.png", "poc.png"])
-    assert (tmp_path / "summary.md").read_text().count("| room_s0.05 |") == 2
+    assert (tmp_path / "summary.md").read_text().count("| room_s0.05 |") == 3
 
 
 def test_real_quick(tmp_path):
