@@ -253,17 +253,16 @@ void LoopFusionAdapter::finish() {
       return;
     }
     m.collectDecisions();  // what the verifier decided last
-    const size_t held = m.held.size();
-    for (const auto& h : m.held) {
-      core::LoopCandidate c = core::candidateFromLoopInfo(h.first.first, h.first.second, h.second.loop_info.data(),
-                                                          h.second.inliers);
+    // The host kept the verdicts of the held candidates: each gets its final one (a drop).
+    const std::vector<core::LoopDecision> dropped =
+        m.host->dropHeld("still held when loop_fusion ended: not confirmed, never used");
+    const size_t held = dropped.size();
+    for (const core::LoopDecision& d : dropped) {
       VerdictContext ctx;
       ctx.verifier = m.host->verifierType();
-      ctx.decision = core::toString(core::LoopDecision::Kind::kDrop);
-      ctx.inliers = h.second.inliers;
-      m.publish(core::Verdict::Reject(core::Reason::kUnconfirmed, c,
-                                      "still held when loop_fusion ended: not confirmed, never used"),
-                ctx);
+      ctx.decision = core::toString(d.kind);
+      ctx.inliers = d.candidate.inliers;
+      m.publish(d.verdict, ctx);
     }
     m.held.clear();
     m.failure = "loop_fusion ended (LoopFusionAdapter::finish)";

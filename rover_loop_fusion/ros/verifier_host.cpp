@@ -276,7 +276,7 @@ core::Verdict VerifierHost::decide(const core::LoopCandidate& c) noexcept {
     std::lock_guard<std::mutex> lock(open_mutex_);
     guarded("remembering a verdict", [&] {
       const auto key = std::make_pair(c.query_index, c.match_index);
-      if (v.deferred) held_[key].push_back(v);
+      if (v.deferred) held_[key].push_back(Open{c, v});
       else loops_[key] = v;
     });
   }
@@ -304,18 +304,14 @@ std::vector<core::LoopDecision> VerifierHost::takeDecisions() noexcept {
       } else {
         auto held = held_.find(key);
         if (held != held_.end()) {
-          at_verify = held->second.front();
+          at_verify = held->second.front().verdict;
           found = true;
           held->second.pop_front();
           if (held->second.empty()) held_.erase(held);
         }
       }
       if (found) {
-        at_verify.accepted = d.verdict.accepted;
-        at_verify.reason = d.verdict.reason;
-        at_verify.detail =
-            std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + at_verify.detail + ")";
-        d.verdict = std::move(at_verify);
+        d.verdict = finalVerdict(std::move(at_verify), d.kind, d.verdict);
         if (d.verdict.accepted) loops_[key] = d.verdict;
       }
       d.verdict.query_index = d.candidate.query_index;
@@ -324,6 +320,39 @@ std::vector<core::LoopDecision> VerifierHost::takeDecisions() noexcept {
     }
   });
   return out;
+}
+
+core::Verdict VerifierHost::finalVerdict(core::Verdict at_verify, core::LoopDecision::Kind kind,
+                                         const core::Verdict& decided) {
+  at_verify.accepted = decided.accepted;
+  at_verify.reason = decided.reason;
+  at_verify.deferred = false;
+  at_verify.detail = std::string(core::toString(kind)) + ": " + decided.detail + " (at verify: " + at_verify.detail + ")";
+  return at_verify;
+}
+
+std::vector<core::LoopDecision> VerifierHost::dropHeld(const std::string& why) noexcept {
+  std::vector<core::LoopDecision> out;
+  std::lock_guard<std::mutex> lock(open_mutex_);
+  guarded("the final verdicts of the candidates still held", [&] {
+    for (const auto& key_held : held_)
+      for (const Open& h : key_held.second) {
+        core::LoopDecision d;
+        d.kind = core::LoopDecision::Kind::kDrop;
+        d.candidate = h.candidate;
+        d.verdict = finalVerdict(h.verdict, d.kind, core::Verdict::Reject(core::Reason::kUnconfirmed, h.candidate, why));
+        out.push_back(d);
+      }
+  });
+  held_.clear();
+  return out;
+}
+
+size_t VerifierHost::heldCount() noexcept {
+  std::lock_guard<std::mutex> lock(open_mutex_);
+  size_t n = 0;
+  for (const auto& key_held : held_) n += key_held.second.size();
+  return n;
 }
 
 bool VerifierHost::publish(const core::Verdict& v, VerdictContext ctx, const std::string& what,

@@ -154,6 +154,14 @@ class VerifierHost {
   /// rover_replay's row of the candidate.
   std::vector<core::LoopDecision> takeDecisions() noexcept;
 
+  /// A host that ends: every candidate decide() held and no decision has ended yet gets its
+  /// final verdict, a drop (unconfirmed, `why`) with its numbers at verify, as takeDecisions()
+  /// gives them; nothing is held afterwards. Call takeDecisions() first (what the verifier
+  /// decided last).
+  std::vector<core::LoopDecision> dropHeld(const std::string& why) noexcept;
+  /// Candidates decide() held that no decision has ended yet.
+  size_t heldCount() noexcept;
+
   /// Logs v (INFO; WARN for invalid_input and revoked) as "<what> accepted/HELD/REJECTED/
   /// REVOKED ..." (not if `what` is empty: the caller sums such verdicts up) and publishes it
   /// (ctx.decision: verify, or the later release/drop/revoke) with a marker at the verifier's
@@ -174,8 +182,15 @@ class VerifierHost {
   /// decide()'s verdicts by (query, match): of the candidates held (in order: the same loop may
   /// be proposed again while held) until their release or drop, and of the loops in use until
   /// their revocation (a released loop's merged verdict replaces its deferred one).
-  std::map<std::pair<int64_t, int64_t>, std::deque<core::Verdict>> held_;
+  struct Open {
+    core::LoopCandidate candidate;
+    core::Verdict verdict;
+  };
+  std::map<std::pair<int64_t, int64_t>, std::deque<Open>> held_;
   std::map<std::pair<int64_t, int64_t>, core::Verdict> loops_;
+  /// `at_verify` (the verdict decide() gave) with the outcome of decision `kind` (`decided`).
+  static core::Verdict finalVerdict(core::Verdict at_verify, core::LoopDecision::Kind kind,
+                                    const core::Verdict& decided);
   std::mutex open_mutex_;
 };
 

@@ -30,6 +30,16 @@ const int kMinQueueSize = 1000;
 /// The largest keyframe number a candidate can name (loop_fusion's indices are int).
 const int64_t kMaxKeyframeNumber = std::numeric_limits<int32_t>::max();
 
+/// What a later decision's verdict is published with: its candidate as handed to verify()
+/// (keyframes by number, inliers); the stamps come from the keyframes (publishVerdict).
+LoopCandidate candidateMsg(const core::LoopCandidate& c) {
+  LoopCandidate msg;
+  msg.query_index = c.query_index;
+  msg.match_index = c.match_index;
+  msg.inliers = c.inliers;
+  return msg;
+}
+
 /// Nearest entry of `m` (keyed by stamp [ns]) within `tol` of `ns`; end() if none.
 template <typename Map>
 typename Map::const_iterator nearest(const Map& m, int64_t ns, int64_t tol) {
@@ -183,15 +193,9 @@ void VerifierNode::finish() {
     // Held candidates get their final verdict too: what the last message decided, then a drop
     // for what nothing confirmed before the end.
     applyDecisions();
-    const size_t held = held_.size();
-    for (const auto& h : held_) {
-      core::LoopCandidate c;
-      c.query_index = h.first.first;
-      c.match_index = h.first.second;
-      publishVerdict(core::Verdict::Reject(core::Reason::kUnconfirmed, c, "still held when the node was shut down"),
-                     h.second, false, "drop");
-    }
-    held_.clear();
+    const std::vector<core::LoopDecision> dropped = host_.dropHeld("still held when the node was shut down");
+    const size_t held = dropped.size();
+    for (const core::LoopDecision& d : dropped) publishVerdict(d.verdict, candidateMsg(d.candidate), false, "drop");
     for (const Incoming& item : inbox) {
       if (!item.candidate) {
         ++unprocessed_keyframes;
@@ -496,9 +500,6 @@ void VerifierNode::verify(const LoopCandidate& msg, int64_t query, int64_t match
   if (v.accepted) useLoop(c, &v);
   v.query_index = query;
   v.match_index = match;
-  const std::pair<int64_t, int64_t> key(query, match);
-  if (v.deferred) held_[key] = msg;
-  if (v.accepted) loop_inliers_[key] = msg.inliers;
   publishVerdict(v, msg);
   applyDecisions();
 }
@@ -517,30 +518,13 @@ void VerifierNode::useLoop(const core::LoopCandidate& c, core::Verdict* v) {
 
 void VerifierNode::applyDecisions() {
   for (const core::LoopDecision& d : host_.takeDecisions()) {
-    const core::LoopCandidate& c = d.candidate;
-    const std::pair<int64_t, int64_t> key(c.query_index, c.match_index);
+    const core::LoopCandidate& c = d.candidate;  // as handed to verify(): inliers included
     core::Verdict v = d.verdict;
-    // What the candidate message said (inliers, stamps): kept for held candidates and loops.
-    LoopCandidate msg;
-    msg.query_index = c.query_index;
-    msg.match_index = c.match_index;
-    msg.inliers = c.inliers;
-    auto held = held_.find(key);
-    if (held != held_.end()) {
-      msg = held->second;
-      held_.erase(held);
-    }
     switch (d.kind) {
       case core::LoopDecision::Kind::kRelease:
         useLoop(c, &v);
-        if (v.accepted) loop_inliers_[key] = msg.inliers;
         break;
       case core::LoopDecision::Kind::kRevoke: {
-        auto loop = loop_inliers_.find(key);
-        if (loop != loop_inliers_.end()) {
-          msg.inliers = loop->second;
-          loop_inliers_.erase(loop);
-        }
         // The node's stand-in of loop_fusion's graph drops it too (loop_fusion: has_loop = false).
         const core::Status g = graph_->removeLoop(c.query_index, c.match_index);
         if (g.ok) changed_ = true;
@@ -552,7 +536,7 @@ void VerifierNode::applyDecisions() {
       case core::LoopDecision::Kind::kDrop:
         break;
     }
-    publishVerdict(v, msg, true, core::toString(d.kind));
+    publishVerdict(v, candidateMsg(c), true, core::toString(d.kind));
   }
 }
 

@@ -206,10 +206,6 @@ class VerifierNode {
 
   // Candidates waiting for their keyframes (received: when the node took them from the inbox).
   WaitingCandidates<LoopCandidate> waiting_;
-  // Candidates the verifier holds (deferred verdict published, final one to come), by (query,
-  // match), as received; and the inlier counts of the loops in use (for a revocation's verdict).
-  std::map<std::pair<int64_t, int64_t>, LoopCandidate> held_;
-  std::map<std::pair<int64_t, int64_t>, int> loop_inliers_;
 
   bool changed_ = false;  // keyframes or loops since the last optimisation
   size_t keyframes_refused_ = 0;
