@@ -5,7 +5,7 @@
 // and sanitizer reports it traps on broken invariants:
 //   - a refused keyframe or commit leaves the graph unchanged;
 //   - verify() never changes the graph;
-//   - an accepted verdict is either `accepted` (converged, score <= threshold) or
+//   - an accepted verdict is either `accepted` (converged, score <= threshold or d2 <= gate) or
 //     `no_trajectory_prior` (by policy); a rejected one never says `accepted`;
 //   - every estimate stays finite, no path length is infinite.
 #include "rover_loop_fusion/core/geometry.h"
@@ -152,7 +152,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         if (vd.reason == Reason::kInvalidInput) ++stats.invalid;
         if (vd.accepted) {
           CHECK(vd.reason == Reason::kAccepted || vd.reason == Reason::kNoTrajectoryPrior);
-          if (vd.reason == Reason::kAccepted) CHECK(vd.converged && vd.score <= vd.threshold);
+          // accepted by the trial (score within its threshold) or, decision chi2, by the gate
+          if (vd.reason == Reason::kAccepted) CHECK(vd.converged && (vd.score <= vd.threshold || vd.d2 <= vd.gate));
         } else {
           CHECK(vd.reason != Reason::kAccepted);
         }

@@ -121,8 +121,7 @@ class Chi2Rule : public DecisionRule {
     // (No path length: its Dijkstra over every loop end would be the one cost that grows with
     // the run; the chi2 decision does not use it.)
     Eigen::Matrix4d C;
-    int anchors = 0;
-    if (!graph_.relativeCovariance(mpos, qpos, calibration_.scale(), &C, &anchors)) {
+    if (!graph_.relativeCovariance(mpos, qpos, calibration_.scale(), &C)) {
       out.check.passed = false;
       out.check.reason = Reason::kInvalidInput;
       out.check.detail = "no covariance of the relative pose (the condensed graph is singular)";
@@ -131,9 +130,10 @@ class Chi2Rule : public DecisionRule {
     const Eigen::Vector4d nu = graph_.innovationVector(c, qpos, mpos);
     Chi2Numbers n;
     out.check = chi2Test(config_, nu, C + graph_.loopCovariance(), &n);
-    measured->score = n.d2;
-    measured->threshold = n.gate;
-    measured->window_size = anchors;
+    // No trial: the test is d2 against the gate (score and threshold are metres and stay NaN).
+    measured->d2 = n.d2;
+    measured->gate = n.gate;
+    measured->threshold = std::numeric_limits<double>::quiet_NaN();
     measured->converged = true;
     if (!out.check.passed) return out;
     if (config_.hold_sigma > 0 && n.sigma > config_.hold_sigma) {
@@ -214,6 +214,8 @@ class RevisitRule : public MetricRule {
     chi2Test(cfg_, nu, C + g_.loopCovariance(), &n);
     out.d2 = n.d2;
     const double reject = chiSquareQuantile(cfg_.revisit_reject_probability, 4);
+    measured->d2 = n.d2;
+    measured->gate = reject;
     std::ostringstream s;
     s.precision(3);
     s << std::fixed << out.check.detail << "; Mahalanobis d2 " << n.d2 << (n.d2 <= reject ? " <= " : " > ") << reject

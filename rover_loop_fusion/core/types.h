@@ -101,12 +101,23 @@ struct Verdict {
   /// now; Verifier::takeDecisions() says later whether it was released or dropped.
   bool deferred = false;
   Reason reason = Reason::kInvalidInput;
-  double score = std::numeric_limits<double>::quiet_NaN();  ///< RMSE of aligned positions [m]
-  double threshold = std::numeric_limits<double>::quiet_NaN();  ///< effective, see VerifierConfig
+  /// The trial's deformation score: RMSE of the aligned positions [m]; NaN without a trial
+  /// (the innovation gate, decision chi2, invalid input).
+  double score = std::numeric_limits<double>::quiet_NaN();
+  /// The score's threshold [m], effective (threshold + threshold_per_metre x path length); the
+  /// configured one where no trial ran (NaN: decision chi2, which has none).
+  double threshold = std::numeric_limits<double>::quiet_NaN();
+  /// The innovation's squared Mahalanobis distance under the drift model through the graph
+  /// (decision chi2; revisit: a candidate the trial rejected, tested for holding); NaN if not
+  /// computed.
+  double d2 = std::numeric_limits<double>::quiet_NaN();
+  /// The chi-square quantile d2 was compared with (chi2: gate_probability; revisit:
+  /// revisit_reject_probability); NaN if none.
+  double gate = std::numeric_limits<double>::quiet_NaN();
   std::string detail;     ///< human-readable explanation (what was wrong, what was done)
   bool converged = false;
   int iterations = 0;     ///< solver iterations of the trial optimisation
-  int window_size = 0;    ///< keyframes optimised and scored
+  int window_size = 0;    ///< keyframes optimised and scored by the trial; 0 without a trial
   /// Distance between where the candidate puts the query keyframe and where the current
   /// estimate X has it, in the match keyframe's frame [m]; NaN if not computed.
   double innovation = std::numeric_limits<double>::quiet_NaN();

@@ -20,7 +20,8 @@ std::string quoted(const std::string& s) {
 
 std::string verdictCsvHeader() {
   return "query_stamp,match_stamp,query_index,match_index,accepted,reason,score,threshold,converged,"
-         "iterations,window_size,solve_ms,elapsed_ms,inliers,innovation,path_length,verifier,detail,final,decision";
+         "iterations,window_size,solve_ms,elapsed_ms,inliers,innovation,path_length,verifier,detail,final,decision,d2,"
+         "gate";
 }
 
 std::string verdictCsvRow(const Verdict& v, double query_stamp, double match_stamp, int inliers,
@@ -31,7 +32,8 @@ std::string verdictCsvRow(const Verdict& v, double query_stamp, double match_sta
     << toString(v.reason) << ',' << std::setprecision(6) << v.score << ',' << v.threshold << ','
     << (v.converged ? 1 : 0) << ',' << v.iterations << ',' << v.window_size << ',' << v.solve_ms
     << ',' << v.elapsed_ms << ',' << inliers << ',' << v.innovation << ',' << v.path_length << ','
-    << verifier << ',' << quoted(v.detail) << ',' << (v.deferred ? 0 : 1) << ',' << decision;
+    << verifier << ',' << quoted(v.detail) << ',' << (v.deferred ? 0 : 1) << ',' << decision << ',' << v.d2 << ','
+    << v.gate;
   return s.str();
 }
 

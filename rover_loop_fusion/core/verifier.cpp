@@ -25,6 +25,8 @@ double msSince(Clock::time_point t0) {
 Verdict withNumbers(Verdict decided, const Verdict& measured, Clock::time_point t0) {
   decided.score = measured.score;
   decided.threshold = measured.threshold;
+  decided.d2 = measured.d2;
+  decided.gate = measured.gate;
   decided.converged = measured.converged;
   decided.iterations = measured.iterations;
   decided.window_size = measured.window_size;

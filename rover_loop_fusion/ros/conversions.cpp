@@ -119,6 +119,8 @@ LoopVerdict toVerdictMsg(const core::Verdict& v, const VerdictContext& ctx, cons
   m.detail = v.detail;
   m.score = v.score;
   m.threshold = v.threshold;
+  m.d2 = v.d2;
+  m.gate = v.gate;
   m.converged = v.converged;
   m.iterations = v.iterations;
   m.window_size = v.window_size;

@@ -51,12 +51,18 @@ def read_labels(path):
 
 
 def ranking_score(row):
-    """The verdict's score, or +inf where the verdict has none to rank by."""
-    try:
-        s = float(row["score"])
-    except (TypeError, ValueError):
+    """The verdict's score [m] or, where it has none (decision chi2), its d2; +inf where the
+    verdict has neither to rank by."""
+    if row["reason"] not in reasons.SCORED:
         return math.inf
-    return s if row["reason"] in reasons.SCORED and math.isfinite(s) else math.inf
+    for key in ("score", "d2"):
+        try:
+            s = float(row.get(key, ""))
+        except (TypeError, ValueError):
+            continue
+        if math.isfinite(s):
+            return s
+    return math.inf
 
 
 def join(verdicts, labels):

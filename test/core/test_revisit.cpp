@@ -203,7 +203,14 @@ TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
     for (; next < row.size() && row[next].query_index == kf.index; ++next) {
       const Verdict vd = v.verify(row[next]);
       EXPECT_FALSE(vd.accepted) << vd.detail;
-      if (vd.deferred) ++held;
+      if (vd.deferred) {
+        ++held;
+        // One meaning per field: the trial's score in metres above its threshold, and the
+        // innovation's d2 within the gate that let it be held.
+        EXPECT_GT(vd.score, vd.threshold) << vd.detail;
+        EXPECT_LE(vd.d2, vd.gate) << vd.detail;
+        EXPECT_GT(vd.window_size, 1) << vd.detail;
+      }
     }
     for (const LoopDecision& d : v.takeDecisions()) decisions.push_back(d);
   }
