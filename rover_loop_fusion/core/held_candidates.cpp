@@ -11,13 +11,9 @@ size_t distance(size_t x, size_t y) { return x > y ? x - y : y - x; }
 
 }  // namespace
 
-size_t HeldCandidates::window(const HeldGroup& g) const {
-  return static_cast<size_t>(g.front().kind == HoldKind::kRevisit ? config_.revisit_stretch : config_.confirm_window);
-}
-
 void HeldCandidates::add(const HeldCandidate& h,
                          const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent) {
-  const size_t window = static_cast<size_t>(h.kind == HoldKind::kRevisit ? config_.revisit_stretch : config_.confirm_window);
+  const size_t window = static_cast<size_t>(h.kind == HoldKind::kRevisit ? config_.revisit_stretch : config_.confirm_stretch);
   const size_t k = static_cast<size_t>(config_.confirm_count);
   for (HeldGroup& g : groups_) {
     const HeldCandidate& f = g.front();
@@ -42,7 +38,8 @@ size_t HeldCandidates::size() const {
 void HeldCandidates::settle(size_t now, const Actions& act) {
   now_ = now;
   const size_t k = static_cast<size_t>(config_.confirm_count);
-  const size_t window = static_cast<size_t>(config_.confirm_window);
+  const size_t window = static_cast<size_t>(config_.confirm_window);    // expiry
+  const size_t stretch = static_cast<size_t>(config_.confirm_stretch);  // how close rival groups are
   for (size_t i = 0; i < groups_.size();) {
     HeldGroup& g = groups_[i];
     if (g.front().kind == HoldKind::kRevisit) {
@@ -71,7 +68,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
       for (size_t j = 0; j < groups_.size(); ++j) {
         if (j == i || groups_[j].front().kind == HoldKind::kRival || groups_[j].front().kind == HoldKind::kRevisit)
           continue;  // rivals contend with accepted loops
-        if (distance(groups_[j].back().query_pos, g.back().query_pos) <= window && 2 * groups_[j].size() >= g.size())
+        if (distance(groups_[j].back().query_pos, g.back().query_pos) <= stretch && 2 * groups_[j].size() >= g.size())
           blocked = true;
       }
       if (!blocked) {
@@ -81,7 +78,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
         act.release(released);
         // Rivals too small to block are contradicted by the released group: dropped.
         for (size_t j = 0; j < groups_.size();) {
-          if (distance(groups_[j].back().query_pos, released.back().query_pos) <= window &&
+          if (distance(groups_[j].back().query_pos, released.back().query_pos) <= stretch &&
               groups_[j].front().kind != HoldKind::kRival && groups_[j].front().kind != HoldKind::kRevisit) {
             act.drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
             groups_.erase(groups_.begin() + j);

@@ -10,7 +10,7 @@
 //               is released; one that fails its test or waits longer than revisit_window is
 //               dropped.
 // This unit owns the bookkeeping: which held candidates form a group (same kind, same segments,
-// queries within confirm_window, every pair of the last confirm_count consistent), which group
+// queries within confirm_stretch (revisit: revisit_stretch), every pair of the last confirm_count consistent), which group
 // is due (confirmed, expired, blocked by a rival group of its stretch) and in which order. What
 // a release, a drop or a revocation does to the graph is the verifier's (the Actions).
 #pragma once
@@ -39,11 +39,11 @@ using HeldGroup = std::vector<HeldCandidate>;
 
 class HeldCandidates {
  public:
-  /// Reads confirm_count, confirm_window and revoke_group.
+  /// Reads confirm_count, confirm_window (expiry), confirm_stretch, revoke_group and revisit_*.
   explicit HeldCandidates(const VerifierConfig& config) : config_(config) {}
 
   /// Holds `h`: it joins the first group of its kind and segments whose last confirm_count
-  /// members lie within confirm_window keyframes of it and are `consistent` with it, or starts
+  /// members lie within confirm_stretch (revisit_stretch) keyframes of it and are `consistent` with it, or starts
   /// a group of its own.
   void add(const HeldCandidate& h, const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent);
   size_t size() const;
@@ -73,7 +73,6 @@ class HeldCandidates {
  private:
   /// decision revisit: settles the kRevisit group at `i`; true if it acted (the group is gone).
   bool settleRevisit(size_t i, const Actions& act);
-  size_t window(const HeldGroup& g) const;
   const VerifierConfig& config_;
   std::vector<HeldGroup> groups_;  ///< by revisit, oldest first
   size_t now_ = 0;                 ///< keyframes at the settle() running

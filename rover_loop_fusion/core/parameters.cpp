@@ -198,8 +198,13 @@ std::vector<Parameter> makeTable() {
   t.push_back(integer("confirm_count", "", &C::confirm_count, 2, 100,
                       "held candidates of one stretch that must agree with each other to be released"));
   t.push_back(integer("confirm_window", "keyframes", &C::confirm_window, 1, 100000,
-                      "a held candidate not confirmed within this many keyframes is dropped; also how close "
-                      "the queries of one stretch are"));
+                      "a held candidate not confirmed within this many keyframes is dropped"));
+  t.push_back(integer("confirm_stretch", "keyframes", &C::confirm_stretch, 1, 100000,
+                      "queries at most this many keyframes apart are one stretch: held candidates that confirm "
+                      "each other, the accepted loops a rival contradicts"));
+  t.push_back(number("revoke_margin", "", &C::revoke_margin, 0.0, 100.0, false,
+                     "revocation: the rivals' misfit must be lower than the contradicted loops' by this much "
+                     "(median squared Mahalanobis distances)"));
   t.push_back(integer("revoke_group", "", &C::revoke_group, 0, 100,
                       "rivals of one stretch that must agree (and outnumber the accepted loops they "
                       "contradict) to revoke those loops; 0: no revocation"));

@@ -50,7 +50,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
-  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.confirm_window));
+  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.confirm_stretch));
   if (against.empty()) return false;
   std::ostringstream s;
   s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
@@ -66,7 +66,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
 std::vector<LoopCandidate> Verifier::rivalTargets(const HeldGroup& group) const {
   std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
   for (const HeldCandidate& h : group)
-    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.confirm_window))) {
+    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.confirm_stretch))) {
       auto& v = votes[{l.query_index, l.match_index}];
       v.first = l;
       ++v.second;
@@ -121,7 +121,7 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
   // prior cannot tell them apart. The misfit of a loop: its innovation's squared Mahalanobis
   // distance under the drift model (both decisions, 4-DoF and 6-DoF); the rivals' median must
   // be within the chi-square gate (gate_probability: they fit at all) and lower than the loops'
-  // by lookalike_margin (2 ln of the likelihood ratio, as the look-alike test). Without a
+  // by revoke_margin (2 ln of the likelihood ratio, as the look-alike test's lookalike_margin). Without a
   // covariance nothing is revoked.
   auto misfit = [&](const LoopCandidate& c) {
     size_t q = 0, m = 0;
@@ -140,13 +140,13 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
   for (const HeldCandidate& h : group) fit_rivals.push_back(misfit(h.candidate));
   const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
   const double gate = chiSquareQuantile(config_.gate_probability, 4);
-  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.lookalike_margin < misfit_loops)) {
+  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.revoke_margin < misfit_loops)) {
     std::ostringstream s;
     s.precision(3);
     s << what.str() << ", but they do not fit the graph without the " << loops.size()
       << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
       << "distance " << misfit_rivals << " vs " << misfit_loops << "; needed: within the gate " << gate
-      << " and lower by lookalike_margin " << config_.lookalike_margin << "): nothing revoked";
+      << " and lower by revoke_margin " << config_.revoke_margin << "): nothing revoked";
     putBack(s.str());
     return;
   }

@@ -302,17 +302,22 @@ struct VerifierConfig {
   double lookalike_distance = 1.5;
   double lookalike_distance_vertical = 1.5;
   double lookalike_margin = 4.0;
+  /// Revocation: the rivals must fit the graph without the loops they contradict better than
+  /// those loops fit it, by this much (difference of median squared Mahalanobis distances).
+  double revoke_margin = 4.0;
   /// Accepted loops at most in the condensed graph (O(anchors) per verification): loops of one
   /// revisit are merged, then older ones thinned.
   int max_loop_anchors = 64;
   /// Holding and confirming (both decisions; Verifier::takeDecisions): a held candidate is
   /// released once confirm_count held candidates of the same stretch (queries within
-  /// confirm_window keyframes, same segments) agree with each other (every pair: the cycle
+  /// confirm_stretch keyframes, same segments) agree with each other (every pair: the cycle
   /// loop - odometry - loop - odometry closes within chi-square gate_probability) and no rival
   /// group of at least half its size contradicts them; dropped if not confirmed within
-  /// confirm_window keyframes after it arrived.
+  /// confirm_window keyframes after it arrived. confirm_stretch is also the stretch of a rival
+  /// (revocation): the accepted loops whose queries lie that close.
   int confirm_count = 3;
   int confirm_window = 40;
+  int confirm_stretch = 40;
   /// Revocation (both decisions; 0 = off): a candidate rejected for contradicting the graph
   /// (innovation_above_bound, score_above_threshold, inconsistent_with_drift) that is
   /// inconsistent with an accepted loop of its own stretch (the cycle test above) is held as a
