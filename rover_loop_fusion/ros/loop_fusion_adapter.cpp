@@ -426,7 +426,7 @@ size_t LoopFusionAdapter::verdictCount() const {
 
 size_t LoopFusionAdapter::heldCount() const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
-  return impl_->held.size();
+  return impl_->host ? impl_->host->heldCount() : 0;  // the host keeps the held candidates' verdicts
 }
 
 }  // namespace rover_loop_fusion

@@ -144,7 +144,10 @@ def test_decision_flag_reaches_rover_replay(tmp_path):
                            "--out", str(tmp_path)]) == 0
     verdicts = _rows(tmp_path / "runs" / "room_s0.05" / "rover" / "verdicts.csv")
     assert len(verdicts) == 80
-    assert all(float(v["threshold"]) == pytest.approx(chi2.ppf(0.999, 4), abs=1e-4) for v in verdicts)
+    # chi2's own fields (d2, gate); no trial, so no score or threshold in metres
+    assert all(float(v["gate"]) == pytest.approx(chi2.ppf(0.999, 4), abs=1e-4) for v in verdicts)
+    assert all(math.isfinite(float(v["d2"])) and math.isnan(float(v["score"])) and math.isnan(float(v["threshold"]))
+               for v in verdicts)
     assert {v["reason"] for v in verdicts} <= {"accepted", "inconsistent_with_drift", "lookalike_closer"}
     assert "ROVER decision: chi2" in (tmp_path / "summary.md").read_text()
     _summary(tmp_path / "summary.csv", "poc")
