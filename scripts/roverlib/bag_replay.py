@@ -67,15 +67,10 @@ class VerifierClient:
             self._cond.notify_all()
 
     def current(self):
-        """What holds now for each candidate: its final verdict (accepted false if revoked since)
-        or, for a candidate still held, its deferred verdict."""
+        """Each candidate's verdict: its final one or, while it is held, its deferred one (a
+        revocation since is in `revoked`: score() counts such a loop as not used)."""
         with self._cond:
             return list(self.verdicts) + [v for held in self.pending.values() for v in held]
-
-    def held(self):
-        """Candidates still held (a deferred verdict, no final one yet)."""
-        with self._cond:
-            return sum(len(h) for h in self.pending.values())
 
     def wait_verdicts(self, n, timeout):
         """Waits until n candidates have a verdict (final, or deferred while held); False on
