@@ -16,7 +16,7 @@ NOTES = {
     "inconsistent_with_drift": "chi2: d2 above the gate",
     "lookalike_closer": "chi2: a look-alike place explains it better",
     "deferred": "held; a final verdict follows",
-    "unconfirmed": "held, then dropped (revisit not confirmed)",
+    "unconfirmed": "held, then dropped: not confirmed",
     "revoked": "an accepted loop removed again",
 }
 REASONS = tuple(NOTES)
