@@ -35,6 +35,22 @@ size_t HeldCandidates::size() const {
   return n;
 }
 
+void HeldCandidates::releaseDropping(size_t i, const Actions& act, const std::string& why,
+                                     const std::function<bool(const HeldGroup&, const HeldGroup&)>& contradicts) {
+  HeldGroup released;
+  released.swap(groups_[i]);
+  groups_.erase(groups_.begin() + i);
+  act.release(released);
+  for (size_t j = 0; j < groups_.size();) {
+    if (contradicts(groups_[j], released)) {
+      act.drop(groups_[j], why);
+      groups_.erase(groups_.begin() + j);
+    } else {
+      ++j;
+    }
+  }
+}
+
 void HeldCandidates::settle(size_t now, const Actions& act) {
   now_ = now;
   const size_t k = static_cast<size_t>(config_.confirm_count);
@@ -72,20 +88,12 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
           blocked = true;
       }
       if (!blocked) {
-        HeldGroup released;
-        released.swap(g);
-        groups_.erase(groups_.begin() + i);
-        act.release(released);
         // Rivals too small to block are contradicted by the released group: dropped.
-        for (size_t j = 0; j < groups_.size();) {
-          if (distance(groups_[j].back().query_pos, released.back().query_pos) <= stretch &&
-              groups_[j].front().kind != HoldKind::kRival && groups_[j].front().kind != HoldKind::kRevisit) {
-            act.drop(groups_[j], "a larger group of candidates of the same stretch contradicts it");
-            groups_.erase(groups_.begin() + j);
-          } else {
-            ++j;
-          }
-        }
+        releaseDropping(i, act, "a larger group of candidates of the same stretch contradicts it",
+                        [&](const HeldGroup& other, const HeldGroup& released) {
+                          return distance(other.back().query_pos, released.back().query_pos) <= stretch &&
+                                 other.front().kind != HoldKind::kRival && other.front().kind != HoldKind::kRevisit;
+                        });
         i = 0;  // the graph changed: look at the rest again
         continue;
       }
@@ -135,19 +143,11 @@ bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
           !(mine + config_.revisit_margin < misfit(groups_[j])))
         blocked = true;
     if (!blocked) {
-      HeldGroup released;
-      released.swap(g);
-      groups_.erase(groups_.begin() + i);
-      act.release(released);
       // The rivals of the released hypothesis contradict it: dropped.
-      for (size_t j = 0; j < groups_.size();) {
-        if (groups_[j].front().kind == HoldKind::kRevisit && near(groups_[j], released)) {
-          act.drop(groups_[j], "a larger hypothesis of the same revisit was released");
-          groups_.erase(groups_.begin() + j);
-        } else {
-          ++j;
-        }
-      }
+      releaseDropping(i, act, "a larger hypothesis of the same revisit was released",
+                      [&](const HeldGroup& other, const HeldGroup& released) {
+                        return other.front().kind == HoldKind::kRevisit && near(other, released);
+                      });
       return true;
     }
   }

@@ -73,6 +73,9 @@ class HeldCandidates {
  private:
   /// decision revisit: settles the kRevisit group at `i`; true if it acted (the group is gone).
   bool settleRevisit(size_t i, const Actions& act);
+  /// Releases the group at `i`, then drops (with `why`) every group that `contradicts` it.
+  void releaseDropping(size_t i, const Actions& act, const std::string& why,
+                       const std::function<bool(const HeldGroup&, const HeldGroup&)>& contradicts);
   const VerifierConfig& config_;
   std::vector<HeldGroup> groups_;  ///< by revisit, oldest first
   size_t now_ = 0;                 ///< keyframes at the settle() running
