@@ -1,7 +1,9 @@
 // Keyframe intake of the pose graph (KeyframeGraph::addKeyframe): the checks of a new keyframe
 // (index, sequence, finite pose, unit quaternion), the plausibility of its step from the
-// previous keyframe of its sequence (max_keyframe_jump, max_stamp_jump) and the recovery from
-// a jump (jump_confirmations: a relocation starts a new segment, or a new clock); then its
+// previous keyframe of its sequence (max_keyframe_jump, max_stamp_jump), the stamp faults told
+// apart from a jump (a repeated message, a stopped clock, one keyframe stamped late) and the
+// recovery from a jump (jump_confirmations: a relocation starts a new segment, or a new clock;
+// a lone first keyframe the run contradicts is discredited); then its
 // estimate, drift moments and odometry edges. Also the segments' union-find (root, componentOf):
 // odometry joins keyframes of one segment, loops join segments.
 #include "rover_loop_fusion/core/pose_graph_impl.h"
@@ -92,7 +94,43 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     // A live sequence: a keyframe far from the previous one or stamped implausibly is refused,
     // unless it is the last of `jump_confirmations` consecutive keyframes that each follow the
     // one before plausibly: then the VIO really relocated (a new segment) or the clock jumped.
-    const std::string implausible = m.implausibleStep(*prev, kf);
+    // Three stamp faults are told apart from a jump first (one stamp policy for every host):
+    // a repeated message, a clock that stopped, and one keyframe stamped late.
+    std::string implausible = m.implausibleStep(*prev, kf);
+    const bool step_ok = (kf.vio.t - prev->vio.t).norm() <= config_.max_keyframe_jump;
+    if (!implausible.empty() && step_ok && stamp == prev->stamp) {
+      const bool same_pose = kf.vio.t == prev->vio.t && kf.vio.q.coeffs() == prev->vio.q.coeffs();
+      if (same_pose)
+        return Status::Error(who + "duplicate: a repeat of keyframe " + describeIndex(prev->index) +
+                             " (same stamp, same pose): refused");
+      // The clock stopped (a stalled driver): the pose still moves plausibly. Stamps only name
+      // keyframes here, so it is kept; never taken as a new clock.
+      implausible.clear();
+      if (!m.clock_stopped) {
+        std::ostringstream w;
+        w.precision(17);
+        w << who << "stamp " << stamp << " equal to the previous keyframe's (" << describeIndex(prev->index)
+          << "): the clock stopped advancing; kept, as every keyframe after it with that stamp and a plausible pose "
+             "(said once; a host that names keyframes by stamp cannot tell them apart)";
+        status = Status::Warning(w.str());
+      }
+      m.clock_stopped = true;
+    } else if (!implausible.empty() && step_ok && stamp < prev->stamp && m.kfs.size() >= 2) {
+      // Stamped before the previous keyframe but plausibly after the one before it: the
+      // previous keyframe's stamp was the wrong one (one message stamped late). Kept; the
+      // previous keyframe keeps its stamp as its name.
+      const Impl::Keyframe& before = m.kfs[m.kfs.size() - 2];
+      if (before.sequence == sequence && before.segment == prev->segment && m.implausibleStep(before, kf).empty()) {
+        std::ostringstream w;
+        w.precision(17);
+        w << who << "stamp " << stamp << " before keyframe " << describeIndex(prev->index) << "'s (" << prev->stamp
+          << ") but plausibly after keyframe " << describeIndex(before.index) << "'s (" << before.stamp
+          << "): keyframe " << describeIndex(prev->index) << "'s stamp was wrong (stamped late); kept";
+        status = Status::Warning(w.str());
+        implausible.clear();
+      }
+    }
+    if (implausible.empty() && stamp != prev->stamp) m.clock_stopped = false;
     if (!implausible.empty()) {
       Impl::Suspect& sp = m.suspect;
       const bool follows = sp.run > 0 && sp.keyframe.sequence == sequence &&
@@ -106,14 +144,31 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
                              (more == 1 ? "keyframe" : "keyframes") +
                              " consistent with it would be taken as a relocation (jump_confirmations)");
       }
-      const bool relocated = !((kf.vio.t - prev->vio.t).norm() <= config_.max_keyframe_jump);
+      const bool relocated = !step_ok;
+      // The previous keyframe is its sequence's only one: the keyframes that agree with each
+      // other outvote it (the first pose of a session needs the same evidence as any jump).
+      const size_t prev_pos = m.kfs.size() - 1;
+      const bool lone_first = relocated && (prev_pos == 0 || m.kfs[prev_pos - 1].sequence != sequence) &&
+                              std::none_of(m.loops.begin(), m.loops.end(), [&](const Impl::Edge& e) {
+                                return e.from == prev_pos || e.to == prev_pos;
+                              });
       if (relocated) kf.segment = m.next_segment--;
+      if (lone_first) {
+        std::ostringstream why;
+        why << run << " keyframes after it agree with each other and not with it (" << implausible
+            << "): a bad first pose of sequence " << sequence;
+        m.discredited[prev_pos] = why.str();
+      }
+      m.clock_stopped = false;
       status = Status::Warning(
           who + implausible + ": accepted after " + std::to_string(run) + " consecutive keyframes agreed (" +
-          (relocated ? "the VIO relocated: a new segment of sequence " + std::to_string(sequence) +
-                           " starts here, without odometry to the keyframes before; loops across the jump "
-                           "have no trajectory prior until one ties the two"
-                     : "a new clock") +
+          (lone_first ? "keyframe " + describeIndex(prev->index) + ", the first of sequence " + std::to_string(sequence) +
+                            ", is discredited: a bad first pose; loops that name it are refused, and sequence " +
+                            std::to_string(sequence) + " goes on from here"
+           : relocated ? "the VIO relocated: a new segment of sequence " + std::to_string(sequence) +
+                             " starts here, without odometry to the keyframes before; loops across the jump "
+                             "have no trajectory prior until one ties the two"
+                       : "a new clock") +
           ")");
     }
   }

@@ -150,6 +150,10 @@ std::string KeyframeGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos,
   if (c.query_index == c.match_index) return "loop from keyframe " + describeIndex(c.query_index) + " to itself";
   if (!find(c.query_index, qpos)) return "unknown query keyframe " + describeIndex(c.query_index);
   if (!find(c.match_index, mpos)) return "unknown match keyframe " + describeIndex(c.match_index);
+  for (size_t pos : {*qpos, *mpos}) {
+    auto bad = discredited.find(pos);
+    if (bad != discredited.end()) return "keyframe " + describeIndex(kfs[pos].index) + " was discredited: " + bad->second;
+  }
   if (c.match_index > c.query_index)
     return "match keyframe " + describeIndex(c.match_index) + " is newer than query keyframe " +
            describeIndex(c.query_index);

@@ -126,6 +126,13 @@ struct KeyframeGraph::Impl {
   Suspect suspect;
   int next_segment = -1;
   bool warned_loaded_map_stamps = false;
+  /// The previous keyframe of a live sequence carried the same stamp: the clock stopped (said
+  /// once per stretch).
+  bool clock_stopped = false;
+  /// Keyframes (by position) that a run of jump_confirmations keyframes contradicted while they
+  /// were their sequence's only keyframe: a bad first pose, kept apart (its own segment) and
+  /// refused in loops (checkLoop), with why.
+  std::map<size_t, std::string> discredited;
   /// What a budgeted trial costs on this machine per window keyframe, learned from the
   /// budgeted solves of >= 500 keyframes so far (below, fixed costs dominate): setup (build,
   /// Ceres' preprocessing and initial evaluation, teardown) and the longest iteration. Before

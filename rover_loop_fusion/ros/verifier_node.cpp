@@ -128,11 +128,17 @@ bool VerifierNode::start(std::string* error) {
   core::VerifierConfig g;  // loop_fusion's graph: its fixed odometry neighbours and Huber loss
   g.mode = p.use_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
   g.anchor_incoming_keyframes = true;
-  // loop_fusion refuses no keyframe jump: its stand-in refuses only what cannot be a pose (the
-  // widest limits of the parameter table); the plugin applies its own limits to every keyframe.
-  g.max_keyframe_jump = core::findParameter("max_keyframe_jump")->max;
-  g.max_stamp_jump = core::findParameter("max_stamp_jump")->max;
-  g.jump_confirmations = static_cast<int>(core::findParameter("jump_confirmations")->min);
+  // One keyframe policy: the graph takes the keyframes the verifier takes. Both run the core's
+  // intake with the plausibility limits of the verifier's namespace (the table's defaults where
+  // it sets none), so a stamp or pose fault refuses the same keyframes in both (the node's graph
+  // numbers keyframes for candidates; a keyframe only one of them had made loops into it
+  // invalid). A plugin with other rules (accept_all keeps every keyframe) leaves the node's.
+  {
+    const ConfigLoad limits = loadVerifierConfig(ros::NodeHandle(pnh_, host_.params().verifier_name), p.use_imu);
+    g.max_keyframe_jump = limits.config.max_keyframe_jump;
+    g.max_stamp_jump = limits.config.max_stamp_jump;
+    g.jump_confirmations = limits.config.jump_confirmations;
+  }
   graph_.reset(new core::KeyframeGraph(g));
 
   odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
@@ -290,6 +296,7 @@ void VerifierNode::drainInbox() { drainSome(static_cast<size_t>(-1)); }
 void VerifierNode::onKeyframe(const nav_msgs::Odometry::ConstPtr& msg) {
   guarded("keyframe message", [&] {
     const int64_t index = next_index_++;
+    passStamp(toNs(msg->header.stamp));
     addKeyframe(*msg, index);
     wake(toNs(msg->header.stamp), index);
   });
@@ -312,6 +319,7 @@ void VerifierNode::onDropped(const Incoming& item) {
       return;
     }
     const int64_t index = next_index_++;
+    passStamp(item.dropped_stamp_ns);
     refuseKeyframe(index, item.dropped_stamp_ns, "not processed: " + droppedText());
     wake(item.dropped_stamp_ns, index);  // candidates waiting for it: rejected, saying why
   });
@@ -334,49 +342,52 @@ void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg, int64_t index) {
   const geometry_msgs::Quaternion& ori = msg.pose.pose.orientation;
   const Eigen::Vector3d t(pos.x, pos.y, pos.z);
   const Eigen::Quaterniond q(ori.w, ori.x, ori.y, ori.z);
-  if (have_keyframe_ && ns <= newest_stamp_ns_) {
-    auto same = by_stamp_.find(ns);
-    if (same != by_stamp_.end()) {
-      refuseKeyframe(index, ns, "duplicate: keyframe " + std::to_string(same->second) + " has the same stamp");
-      return;
-    }
-    // Older than the newest keyframe: the graph refuses it unless it confirms a new clock
-    // (core: max_stamp_jump / jump_confirmations), so the ordering rule lives in one place.
-  }
-  const core::Status s = graph_->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q);
-  if (!s.ok) {
-    refuseKeyframe(index, ns, s.message);
-    return;
-  }
-  if (s.warning()) ROS_WARN("[rover] keyframe message %ld: %s", static_cast<long>(index), s.message.c_str());
-  by_stamp_[ns] = index;
-  stamp_of_[index] = ns;
-  newest_stamp_ns_ = ns;
-  have_keyframe_ = true;
-  changed_ = true;
+  // The core's intake decides (a repeat, out-of-order stamps, a late stamp, a stopped clock,
+  // jumps): the ordering rules live in one place, the same as the verifier's. The verifier sees
+  // every keyframe message the node's graph sees, refused ones too, so that a run of refused
+  // keyframes (a relocation, a new clock) is confirmed in both at the same keyframe.
+  const double stamp = msg.header.stamp.toSec();
+  const core::Status s = graph_->addKeyframe(index, stamp, params_.sequence, t, q);
   core::Status added;
   std::string threw;
   if (!guarded("verifier " + host_.verifierType() + ": addKeyframe " + std::to_string(index),
-               [&] { added = host_.verifier()->addKeyframe(index, msg.header.stamp.toSec(), params_.sequence, t, q); },
-               &threw))
+               [&] { added = host_.verifier()->addKeyframe(index, stamp, params_.sequence, t, q); }, &threw))
     added = core::Status::Error("the verifier threw: " + threw);
-  if (added.warning())
-    ROS_WARN("[rover] verifier, keyframe %ld: %s", static_cast<long>(index), added.message.c_str());
-  if (!added.ok)
-    refused_warning_.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + added.message +
-                          "); loops that involve it are rejected");  applyDecisions();
+  if (!s.ok) {
+    refuseKeyframe(index, ns, s.message);
+  } else {
+    if (s.warning()) ROS_WARN("[rover] keyframe message %ld: %s", static_cast<long>(index), s.message.c_str());
+    if (!by_stamp_.emplace(ns, index).second) shared_stamps_.insert(ns);
+    stamp_of_[index] = ns;
+    newest_stamp_ns_ = have_keyframe_ ? std::max(newest_stamp_ns_, ns) : ns;
+    have_keyframe_ = true;
+    changed_ = true;
+    if (added.warning() && added.message != s.message)
+      ROS_WARN("[rover] verifier, keyframe %ld: %s", static_cast<long>(index), added.message.c_str());
+    if (!added.ok)
+      refused_warning_.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + added.message +
+                            "); loops that involve it are rejected");
+  }
+  applyDecisions();
+}
+
+void VerifierNode::passStamp(int64_t ns) {
+  if (have_message_ && ns > last_message_ns_) passed_stamp_ns_ = std::max(passed_stamp_ns_, last_message_ns_);
+  last_message_ns_ = ns;
+  have_message_ = true;
 }
 
 void VerifierNode::refuseKeyframe(int64_t index, int64_t ns, const std::string& why) {
   ++keyframes_refused_;
   refused_by_index_[index] = why;
-  if (!by_stamp_.count(ns)) refused_by_stamp_[ns] = why;
+  if (!by_stamp_.count(ns)) refused_by_stamp_[ns] = index;
   refused_order_.emplace_back(index, ns);
   if (refused_order_.size() > kRefusedKept) {
     const std::pair<int64_t, int64_t> old = refused_order_.front();
     refused_order_.pop_front();
     refused_by_index_.erase(old.first);
-    refused_by_stamp_.erase(old.second);
+    auto same = refused_by_stamp_.find(old.second);
+    if (same != refused_by_stamp_.end() && same->second == old.first) refused_by_stamp_.erase(same);
   }
   refused_warning_.warn("keyframe message " + std::to_string(index) + " (stamp " + stampText(rosTimeFromNs(ns)) +
                         ") refused: " + why + "; loop candidates that name it get invalid_input");
@@ -402,6 +413,7 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
     }
     auto refused = refused_by_index_.find(index);
     if (refused != refused_by_index_.end()) {
+      *found = index;  // (named in the verdict: the keyframe message had that number)
       *why = who + std::to_string(index) + " was refused (" + refused->second + ")";
       return Resolution::kInvalid;
     }
@@ -416,15 +428,23 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
   const int64_t tol = static_cast<int64_t>(std::llround(params_.stamp_tolerance * 1e9));
   auto hit = nearest(by_stamp_, ns, tol);
   if (hit != by_stamp_.end()) {
+    if (shared_stamps_.count(hit->first)) {
+      *why = who + "with stamp " + stampText(stamp) + ": several keyframes carry that stamp (the clock stopped), "
+             "so it names none of them; name keyframes by their number";
+      return Resolution::kInvalid;
+    }
     *found = hit->second;
     return Resolution::kFound;
   }
   auto refused = nearest(refused_by_stamp_, ns, tol);
   if (refused != refused_by_stamp_.end()) {
-    *why = who + "with stamp " + stampText(stamp) + " was refused (" + refused->second + ")";
+    *found = refused->second;  // (named in the verdict: the keyframe message had that number)
+    auto reason = refused_by_index_.find(refused->second);
+    *why = who + std::to_string(refused->second) + " (stamp " + stampText(stamp) + ") was refused" +
+           (reason != refused_by_index_.end() ? " (" + reason->second + ")" : std::string());
     return Resolution::kInvalid;
   }
-  if (!have_keyframe_ || ns > newest_stamp_ns_ + tol) {
+  if (ns > passed_stamp_ns_ + tol) {  // (passed: see passStamp)
     *why = who + "with stamp " + stampText(stamp) + " has not arrived";
     return Resolution::kWait;
   }
@@ -445,17 +465,21 @@ bool VerifierNode::tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* wai
   std::string why_q, why_m;
   const Resolution rq = resolve(msg.query_index, msg.query_stamp, "query", &q, &why_q);
   const Resolution rm = resolve(msg.match_index, msg.match_stamp, "match", &m, &why_m);
-  if (rq == Resolution::kInvalid || rm == Resolution::kInvalid) {
-    reject(msg, q, m, rq == Resolution::kInvalid ? why_q : why_m);
-  } else if (rq == Resolution::kFound && rm == Resolution::kFound) {
-    verify(msg, q, m);
-  } else if (rq == Resolution::kFound) {
-    // Keyframes arrive in order: a match that has not arrived is newer than the query.
-    reject(msg, q, m, why_m + " although the query keyframe has: the match must be the older keyframe");
-  } else {
+  if (rq == Resolution::kInvalid) {
+    reject(msg, q, m, why_q);
+  } else if (rq == Resolution::kWait) {
+    // Decided when the query keyframe arrives (a bad match too: the verdict then names the
+    // query as rover_replay's does, whichever topic's message came first).
     waits->push_back(waitKey(msg.query_index, msg.query_stamp));
     if (rm == Resolution::kWait) waits->push_back(waitKey(msg.match_index, msg.match_stamp));
     return false;
+  } else if (rm == Resolution::kInvalid) {
+    reject(msg, q, m, why_m);
+  } else if (rm == Resolution::kFound) {
+    verify(msg, q, m);
+  } else {
+    // Keyframes arrive in order: a match that has not arrived is newer than the query.
+    reject(msg, q, m, why_m + " although the query keyframe has: the match must be the older keyframe");
   }
   return true;
 }

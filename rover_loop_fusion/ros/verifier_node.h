@@ -18,9 +18,14 @@
 // Robustness: a candidate that arrives before its keyframes waits up to ~candidate_timeout
 // seconds (indexed by the keyframe it waits for: each message costs O(log n) however many
 // wait); then, or when it names keyframes that never came or were refused, it gets an
-// invalid_input verdict with a ROS_WARN. Malformed keyframes (NaN, non-unit quaternion,
-// duplicate or out-of-order stamps) are refused with a ROS_WARN (the first 20 one by one,
-// then a summary every 10 s); the last 10000 refusals are remembered to explain verdicts.
+// invalid_input verdict with a ROS_WARN. Keyframes are checked by the verifier's own rules
+// (the core's keyframe intake, with the plausibility limits of the verifier's namespace:
+// max_keyframe_jump, max_stamp_jump, jump_confirmations), so the node and the verifier keep the
+// same keyframes: malformed ones (NaN, non-unit quaternion, a repeated message, out-of-order
+// stamps, jumps) are refused with a ROS_WARN (the first 20 one by one, then a summary every
+// 10 s); the last 10000 refusals are remembered to explain verdicts. A keyframe stamped late
+// is kept, and so are keyframes of a clock that stopped (a stamp several keyframes carry cannot
+// name one: candidates must name them by number).
 // Nothing a message contains stops the node.
 //
 // Threading: the subscriptions have their own callback queue and thread, which only append
@@ -62,9 +67,11 @@
 
 #include <atomic>
 #include <deque>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -145,6 +152,9 @@ class VerifierNode {
   /// Decides what can be decided about a candidate: verifies or rejects it (true), or it has to
   /// wait for its query keyframe (and maybe its match): false, with what it waits for.
   bool tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits);
+  /// A keyframe message with stamp `ns` arrived (processed or not): the previous message's
+  /// stamp is passed if this one is later (passed_stamp_ns_).
+  void passStamp(int64_t ns);
   WaitKey waitKey(int64_t index, const ros::Time& stamp) const;
   /// Re-examines the waiting candidates that a keyframe with stamp `ns` / number `index` may
   /// have resolved, in arrival order.
@@ -198,11 +208,18 @@ class VerifierNode {
   std::map<int64_t, int64_t> by_stamp_;  // stamp [ns] -> index, keyframes in the graph
   std::map<int64_t, int64_t> stamp_of_;  // index -> stamp [ns], keyframes in the graph
   std::map<int64_t, std::string> refused_by_index_;  // the last kRefusedKept refused keyframe messages
-  std::map<int64_t, std::string> refused_by_stamp_;  // (stamps no graph keyframe has)
+  std::map<int64_t, int64_t> refused_by_stamp_;  // stamp -> index of those (stamps no graph keyframe has)
   std::deque<std::pair<int64_t, int64_t>> refused_order_;  // (index, stamp) oldest first
   RepeatedWarning refused_warning_;
+  std::set<int64_t> shared_stamps_;  // stamps several graph keyframes carry (the clock stopped)
   bool have_keyframe_ = false;
   int64_t newest_stamp_ns_ = 0;  // newest stamp of a keyframe in the graph
+  // The stamps the keyframe stream has passed: the newest stamp of a keyframe message that a
+  // later-stamped message followed (a stamp ahead of the messages after it, one keyframe stamped
+  // late, is not passed). A candidate's stamp that names no keyframe is invalid only once passed.
+  bool have_message_ = false;
+  int64_t last_message_ns_ = 0;
+  int64_t passed_stamp_ns_ = std::numeric_limits<int64_t>::min();
 
   // Candidates waiting for their keyframes (received: when the node took them from the inbox).
   WaitingCandidates<LoopCandidate> waiting_;

@@ -15,6 +15,7 @@ the ATE (SE(3)-aligned position RMSE, Umeyama) of the odometry, of loop_fusion's
 with the loops each node accepted and of the verifier's own estimate against the ground truth.
 
 Needs rospy and the package's generated messages (source devel/setup.bash)."""
+import bisect
 import collections
 import os
 import threading
@@ -112,22 +113,33 @@ class VerifierClient:
 
 class _Decidable:
     """Mirrors rover_verifier_node's rule: a candidate is decided as soon as its query keyframe
-    has arrived (by arrival number) or its query stamp is not newer than the newest keyframe."""
+    has arrived (by arrival number), a keyframe message with its query stamp has arrived, or the
+    stream has passed its query stamp (the node's passStamp: the stamp of a message that a
+    later-stamped one followed; one keyframe stamped late is not passed)."""
 
     def __init__(self, tolerance):
         self.tol_us = int(round(tolerance * 1e6))
         self.count = 0
-        self.newest = None
+        self.stamps = []  # of the keyframe messages, sorted
+        self.last = None
+        self.passed = None
 
     def keyframe(self, msg):
         self.count += 1
         k = rbag.stamp_key(msg.header.stamp)
-        self.newest = k if self.newest is None else max(self.newest, k)
+        if self.last is not None and k > self.last:
+            self.passed = self.last if self.passed is None else max(self.passed, self.last)
+        self.last = k
+        bisect.insort(self.stamps, k)
 
     def __call__(self, msg):
         if msg.query_index >= 0:
             return msg.query_index < self.count
-        return self.newest is not None and rbag.stamp_key(msg.query_stamp) <= self.newest + self.tol_us
+        k = rbag.stamp_key(msg.query_stamp)
+        i = bisect.bisect_left(self.stamps, k - self.tol_us)
+        if i < len(self.stamps) and self.stamps[i] <= k + self.tol_us:
+            return True
+        return self.passed is not None and k <= self.passed + self.tol_us
 
 
 def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, final_timeout=60.0,

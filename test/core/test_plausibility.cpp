@@ -191,6 +191,108 @@ TEST(StampJump, ANewClockIsAcceptedAfterConfirmations) {
   EXPECT_TRUE(std::isfinite(vd.path_length));
 }
 
+TEST(StampJump, OneKeyframeStampedLateCostsNoKeyframe) {
+  // Issue 22 item 1: keyframe 100 of the corridor stamped 1000 s late (within max_stamp_jump,
+  // so it is taken): the keyframes after it were "out of order" until 3 confirmed a new clock
+  // (2 refused, loops into them invalid). Now the next keyframe, stamped after keyframe 99's,
+  // says keyframe 100's stamp was the wrong one and nothing is refused.
+  const int64_t k = unnamedKeyframe(kCorridor);
+  const Outcome clean = replay(kCorridor, -1, [](sim::ScenarioKeyframe*) {});
+  const Outcome o = replay(kCorridor, k, [](sim::ScenarioKeyframe* kf) { kf->stamp += 1000.0; });
+  EXPECT_EQ(o.refused, 0) << (o.refusals.empty() ? "" : o.refusals[0]);
+  EXPECT_EQ(o.tp, clean.tp);
+  EXPECT_EQ(o.fp, 0);
+  Verifier v;
+  fill(v, 100);
+  ASSERT_TRUE(v.addKeyframe(100, 110.0 + 1000.0, 1, Eigen::Vector3d(50.0, 0, 0), kI).ok);
+  const Status next = v.addKeyframe(101, 111.0, 1, Eigen::Vector3d(50.5, 0, 0), kI);
+  ASSERT_TRUE(next.ok) << next.message;
+  EXPECT_NE(next.message.find("keyframe 100's stamp was wrong"), std::string::npos) << next.message;
+  EXPECT_TRUE(v.addKeyframe(102, 112.0, 1, Eigen::Vector3d(51.0, 0, 0), kI).ok);
+  // A stamp before both is still out of order.
+  EXPECT_FALSE(v.addKeyframe(103, 105.0, 1, Eigen::Vector3d(51.5, 0, 0), kI).ok);
+}
+
+TEST(StampJump, AClockThatStopsIsKeptAndARepeatedMessageIsNot) {
+  // Issue 22 item 2: every stamp from keyframe 200 on equal (a stalled driver) refused every
+  // keyframe after it: 160 of the corridor's, recall 0.16. A pose that moves plausibly keeps
+  // its keyframe (one warning for the stretch); the same stamp and the same pose is a repeat.
+  const Outcome clean = replay(kCorridor, -1, [](sim::ScenarioKeyframe*) {});
+  double frozen = -1.0;
+  {
+    sim::Scenario s;
+    std::string error;
+    ASSERT_TRUE(sim::loadScenario(kCorridor, &s, &error)) << error;
+    Verifier v;
+    int refused = 0, warnings = 0, tp = 0;
+    size_t next = 0;
+    for (sim::ScenarioKeyframe k : s.keyframes) {
+      if (k.index == 200) frozen = k.stamp;
+      if (k.index >= 200) k.stamp = frozen;
+      const Status st = v.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
+      refused += !st.ok;
+      warnings += st.ok && st.warning();
+      for (; next < s.candidates.size() && s.candidates[next].candidate.query_index <= k.index; ++next) {
+        const sim::ScenarioCandidate& c = s.candidates[next];
+        const Verdict vd = v.verify(c.candidate);
+        if (vd.accepted) v.commit(c.candidate);
+        tp += c.label == 1 && vd.accepted;
+      }
+    }
+    EXPECT_EQ(refused, 0);
+    EXPECT_EQ(warnings, 1) << "one warning for the stretch";
+    EXPECT_EQ(tp, clean.tp);
+  }
+  Verifier v;
+  fill(v, 100);
+  const Status repeat = v.addKeyframe(100, 109.0, 1, Eigen::Vector3d(49.5, 0, 0), kI);
+  EXPECT_FALSE(repeat.ok);
+  EXPECT_NE(repeat.message.find("duplicate"), std::string::npos) << repeat.message;
+  const Status stopped = v.addKeyframe(101, 109.0, 1, Eigen::Vector3d(50.0, 0, 0), kI);
+  ASSERT_TRUE(stopped.ok) << stopped.message;
+  EXPECT_NE(stopped.message.find("clock stopped"), std::string::npos) << stopped.message;
+  const Status again = v.addKeyframe(102, 109.0, 1, Eigen::Vector3d(50.5, 0, 0), kI);
+  EXPECT_TRUE(again.ok && !again.warning()) << again.message;
+  // The clock goes on: a later stopped stretch is said again.
+  ASSERT_TRUE(v.addKeyframe(103, 110.0, 1, Eigen::Vector3d(51.0, 0, 0), kI).ok);
+  EXPECT_TRUE(v.addKeyframe(104, 110.0, 1, Eigen::Vector3d(51.5, 0, 0), kI).warning());
+}
+
+TEST(KeyframeJump, ABadFirstKeyframeIsOutvotedNotTakenAsTheReference) {
+  // Issue 22 item 7: keyframe 0 at x = 5e7 m became the session's reference: the keyframes
+  // after it were refused, then taken as a relocation, and loops into keyframe 0 were held as
+  // "no trajectory prior". Now the run that agrees with itself discredits the lone first pose:
+  // loops that name it are invalid input.
+  Verifier v;
+  ASSERT_TRUE(v.addKeyframe(0, 10.0, 1, Eigen::Vector3d(5e7, 0, 0), kI).ok);
+  EXPECT_FALSE(v.addKeyframe(1, 11.0, 1, Eigen::Vector3d(0.5, 0, 0), kI).ok);
+  EXPECT_FALSE(v.addKeyframe(2, 12.0, 1, Eigen::Vector3d(1.0, 0, 0), kI).ok);
+  const Status third = v.addKeyframe(3, 13.0, 1, Eigen::Vector3d(1.5, 0, 0), kI);
+  ASSERT_TRUE(third.ok) << third.message;
+  EXPECT_NE(third.message.find("keyframe 0, the first of sequence 1, is discredited"), std::string::npos)
+      << third.message;
+  for (int k = 4; k < 120; ++k) ASSERT_TRUE(v.addKeyframe(k, 10.0 + k, 1, Eigen::Vector3d(0.5 * k, 0, 0), kI).ok);
+  const Verdict into = v.verify(loop(100, 0));
+  EXPECT_EQ(into.reason, Reason::kInvalidInput) << into.detail;
+  EXPECT_NE(into.detail.find("discredited"), std::string::npos) << into.detail;
+  EXPECT_FALSE(v.commit(loop(100, 0)).ok);
+  // The keyframes that outvoted it are one trajectory: a loop among them has its prior.
+  const Verdict within = v.verify(loop(110, 100, 5.0));
+  EXPECT_NE(within.reason, Reason::kNoTrajectoryPrior) << within.detail;
+  EXPECT_TRUE(std::isfinite(within.path_length)) << within.detail;
+  // A first keyframe with company is not outvoted: the later run is a relocation.
+  core::VerifierConfig cfg;
+  cfg.accept_without_prior = false;
+  Verifier w(cfg);
+  fill(w, 10);
+  EXPECT_FALSE(w.addKeyframe(10, 20.0, 1, Eigen::Vector3d(100.0, 0, 0), kI).ok);
+  EXPECT_FALSE(w.addKeyframe(11, 21.0, 1, Eigen::Vector3d(100.5, 0, 0), kI).ok);
+  const Status reloc = w.addKeyframe(12, 22.0, 1, Eigen::Vector3d(101.0, 0, 0), kI);
+  EXPECT_NE(reloc.message.find("new segment"), std::string::npos) << reloc.message;
+  const Verdict across = w.verify(loop(12, 0, 1.0));
+  EXPECT_EQ(across.reason, Reason::kNoTrajectoryPrior) << across.detail;
+}
+
 TEST(LoadedMap, KeyframesSavedOutOfTimeOrderAreKeptWithOneWarning) {
   // loop_fusion's loadPoseGraph hands every saved keyframe as sequence 0, by index: a map of
   // two sessions, the second recorded earlier, has stamps that go back. Before: every keyframe
