@@ -3,7 +3,7 @@
 # on first use, then runs the family's script (scripts/bench/) with the venv's Python:
 #
 #   ./scripts/bench.sh poc|real|posegraph [--split test|tuning] [--quick] [options, --help]
-#   ./scripts/bench.sh cost|long_replay [--quick] [options, --help]
+#   ./scripts/bench.sh cost|long_replay|fault_replay [--quick] [options, --help]
 #   ./scripts/bench.sh all [--quick]          poc, real, posegraph, cost, one after the other
 #   ./scripts/bench.sh agreement [--quick] ... the condensed trial's decisions against the full trial's
 #                                             on every family (scripts/bench/agreement.py)
@@ -17,8 +17,8 @@
 set -euo pipefail
 family="${1:-}"
 case "$family" in
-  poc|real|posegraph|cost|long_replay|agreement|identity|all|sweep|evaluate|diagnostics) shift ;;
-  *) echo "usage: $0 poc|real|posegraph|cost|long_replay|agreement|identity|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
+  poc|real|posegraph|cost|long_replay|fault_replay|agreement|identity|all|sweep|evaluate|diagnostics) shift ;;
+  *) echo "usage: $0 poc|real|posegraph|cost|long_replay|fault_replay|agreement|identity|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
 esac
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 source "$ROVER_ROOT/scripts/venv.sh"

@@ -99,6 +99,28 @@ def _shift_from(k, dx):
     return f
 
 
+def _frozen_stretch(k, n):
+    """Stamps of keyframes k .. k+n-1 equal to k's (a clock that stalls, then recovers)."""
+    def f(msgs):
+        frozen = next(m.stamp for m in msgs if m.index == k)
+        for m in msgs:
+            if k <= m.index < k + n:
+                m.stamp = frozen
+        return msgs
+    return f
+
+
+def _burst(k, n):
+    """Keyframes k .. k+n-1 (and their candidates) arrive at once, at keyframe k's time."""
+    def f(msgs):
+        at = next(m.arrival for m in msgs if m.index == k)
+        for m in msgs:
+            if k <= m.index < k + n:
+                m.arrival = at
+        return msgs
+    return f
+
+
 def _deleted(k):
     def f(msgs):
         return [m for m in msgs if m.index != k]
@@ -148,10 +170,16 @@ FAULTS = {
 
 def inject(s, name, by_number=False):
     """The scenario s (one sequence, keyframes in order) with the fault `name` of FAULTS."""
+    return inject_all(s, name, [FAULTS[name][2]], by_number)
+
+
+def inject_all(s, name, fault_list, by_number=False):
+    """The scenario s with every fault of fault_list (functions of the list of messages, as in
+    FAULTS, or _frozen_stretch, _burst), applied in order; `name` names the faulty run."""
     from . import scenario as rscenario
-    fault = FAULTS[name][2]
     msgs = [KeyframeMessage(k.index, k.stamp, k.T, k.stamp) for k in s.keyframes]
-    msgs = fault(msgs)
+    for fault in fault_list:
+        msgs = fault(msgs)
     arrivals = [m.index for m in msgs]
     number = {}  # clean index -> arrival number (the first message of it)
     for n, m in enumerate(msgs):

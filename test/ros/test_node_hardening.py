@@ -13,12 +13,10 @@ with its own parameters (node_hardening.test starts none):
 - refused keyframes: the first 20 warnings one by one, then summaries;
 - parameters out of range stop the node naming the parameter; unknown keys are reported;
 - the master restarts: the node exits with status 2 (verifier.launch respawns it)."""
-import math
 import os
 import signal
 import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -349,28 +347,16 @@ class NodeHardening(unittest.TestCase):
     def test_the_node_exits_when_its_master_restarts(self):
         # A node whose master restarted is registered nowhere: nobody can reach its topics or
         # services. It exits with status 2 so that roslaunch's respawn brings it back.
-        with socket.socket() as s:
-            s.bind(("localhost", 0))
-            port = s.getsockname()[1]
-        env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{port}")
-        masters = []
-
-        def start_master():
-            m = subprocess.Popen(["rosmaster", "--core", "-p", str(port)], env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            masters.append(m)
-            master = rosgraph.Master("/node_hardening", master_uri=env["ROS_MASTER_URI"])
-            self.assertTrue(wait_until(lambda: _is_up(master)), "rosmaster did not start")
-
+        masters = PrivateMaster("/node_hardening")
+        env = masters.env
         node = None
         try:
-            start_master()
+            self.assertTrue(masters.start(), "rosmaster did not start")
             node = Node("watchdog", env=env, wait=False)
             self.assertTrue(wait_until(lambda: "candidates from" in node.output(), 60.0), node.output())
-            masters[0].terminate()
-            masters[0].wait()
+            masters.stop()
             self.assertTrue(wait_until(lambda: "unreachable" in node.output(), 30.0), node.output())
-            start_master()
+            self.assertTrue(masters.start(), "rosmaster did not start again")
             status = node.wait_exit(60.0)
             self.assertEqual(status, 2, node.output())
             self.assertIn("master restarted", node.output())
@@ -380,10 +366,7 @@ class NodeHardening(unittest.TestCase):
                     node.proc.kill()
                     node.proc.wait()
                 os.unlink(node.log.name)
-            for m in masters:
-                if m.poll() is None:
-                    m.terminate()
-                    m.wait()
+            masters.close()
 
 
 def _is_up(master):
@@ -392,6 +375,37 @@ def _is_up(master):
         return True
     except Exception:
         return False
+
+
+class PrivateMaster:
+    """A rosmaster of the test's own on a free port, started, stopped and started again (a node
+    that watches its master): `env` points a node at it."""
+
+    def __init__(self, caller):
+        with socket.socket() as s:
+            s.bind(("localhost", 0))
+            self.port = s.getsockname()[1]
+        self.env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{self.port}")
+        self.caller = caller
+        self.procs = []
+
+    def start(self):
+        """Starts a master on the port; True once it answers."""
+        self.procs.append(subprocess.Popen(["rosmaster", "--core", "-p", str(self.port)], env=self.env,
+                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        master = rosgraph.Master(self.caller, master_uri=self.env["ROS_MASTER_URI"])
+        return wait_until(lambda: _is_up(master))
+
+    def stop(self):
+        """Stops the running master."""
+        self.procs[-1].terminate()
+        self.procs[-1].wait()
+
+    def close(self):
+        for m in self.procs:
+            if m.poll() is None:
+                m.terminate()
+                m.wait()
 
 
 if __name__ == "__main__":

@@ -17,8 +17,6 @@ import csv
 import math
 import os
 import re
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -29,8 +27,7 @@ import rospy
 from rover_loop_fusion.srv import Optimize
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node, Verdicts, keyframe, candidate, publishers, wait_until, _is_up  # noqa: E402
-import rosgraph  # noqa: E402
+from test_node_hardening import Node, PrivateMaster, Verdicts, keyframe, candidate, publishers, wait_until  # noqa: E402
 from roverlib import bag, bag_replay, scenario  # noqa: E402
 
 PKG = "rover_loop_fusion"
@@ -230,24 +227,13 @@ class NodeReliability(unittest.TestCase):
     def test_candidates_undecided_when_the_master_restarts_get_their_final_verdict_in_the_log(self):
         # issue 22 item 9: a run that ended because the master restarted (exit status 2) gave the
         # candidates still waiting or held no final verdict: the CSV log lacked them.
-        with socket.socket() as s:
-            s.bind(("localhost", 0))
-            port = s.getsockname()[1]
-        env = dict(os.environ, ROS_MASTER_URI=f"http://localhost:{port}")
-        masters = []
+        masters = PrivateMaster("/node_reliability")
+        env = masters.env
         log = tempfile.NamedTemporaryFile(suffix=".csv", delete=False).name
         os.unlink(log)
-
-        def start_master():
-            m = subprocess.Popen(["rosmaster", "--core", "-p", str(port)], env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            masters.append(m)
-            master = rosgraph.Master("/node_reliability", master_uri=env["ROS_MASTER_URI"])
-            self.assertTrue(wait_until(lambda: _is_up(master)), "rosmaster did not start")
-
         node = None
         try:
-            start_master()
+            self.assertTrue(masters.start(), "rosmaster did not start")
             subprocess.run(["rosparam", "set", "/restart/verdict_log", log], env=env, check=True)
             subprocess.run(["rosparam", "set", "/restart/candidate_timeout", "600.0"], env=env, check=True)
             node = Node("restart", env=env, wait=False)
@@ -261,10 +247,9 @@ class NodeReliability(unittest.TestCase):
                             "relative_pose: {orientation: {w: 1.0}}, inliers: 40}"],
                            env=env, check=True, stdout=subprocess.DEVNULL)
             self.assertTrue(wait_until(lambda: "1 keyframe" in _optimize_text(env), 30.0))
-            masters[0].terminate()
-            masters[0].wait()
+            masters.stop()
             self.assertTrue(wait_until(lambda: "unreachable" in node.output(), 30.0), node.output())
-            start_master()
+            self.assertTrue(masters.start(), "rosmaster did not start again")
             self.assertEqual(node.wait_exit(60.0), 2, node.output())
             with open(log) as f:
                 rows = [line for line in f if line.strip()]
@@ -277,10 +262,7 @@ class NodeReliability(unittest.TestCase):
                     node.proc.kill()
                     node.proc.wait()
                 os.unlink(node.log.name)
-            for m in masters:
-                if m.poll() is None:
-                    m.terminate()
-                    m.wait()
+            masters.close()
             if os.path.exists(log):
                 os.unlink(log)
 

@@ -1,0 +1,258 @@
+#!/usr/bin/env python3
+"""Fault-injection replay: a long simulated run played through rover_verifier_node twice, clean
+and with faults injected, side by side. A benchmark, not a test: it prints figures and writes
+results/fault_replay/ (summary.txt, clean/ and faulty/ verdict logs and node output).
+
+  scripts/bench/fault_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 40]
+                                [--sigma 0.03] [--seed 3] [--out results/fault_replay]
+
+The faulty run has, at fifths of the run (roverlib.faults):
+  - one keyframe stamped 1000 s late;
+  - a stretch of 50 keyframes whose clock stands still (every stamp the first one's);
+  - one keyframe never sent;
+  - a burst: 300 keyframes and their candidates published at once, with the node's queue_size
+    at 10 (raised to the node's minimum, 1000, with a warning);
+  - a full-disk episode: the verdict log on a small tmpfs that a filler file fills while 10 %
+    of the candidates are decided, then frees (needs root to mount the tmpfs; skipped with
+    the reason otherwise).
+Candidates name their keyframes by stamp, as loop_fusion's are recorded; those that name a
+keyframe of the stopped stretch by stamp are invalid (a stamp several keyframes carry names
+none). Reported per run: verdicts received on ~loop_verdicts (one final per candidate?), true
+and false loops accepted, recall; for the log: rows, whole rows, header, rows the node counted
+lost. The figure to read: the faulty run's recall beside the clean run's.
+
+Needs the package built and sourced (scripts/test.sh or scripts/demo.sh do that); runs its own
+roscore on a free port."""
+import argparse
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from long_replay import free_port  # noqa: E402
+from roverlib import bag as rbag  # noqa: E402
+from roverlib import bench, faults, scenes  # noqa: E402
+
+
+def make_runs(a):
+    laps = (a.keyframes + 119) // 120
+    s = scenes.make_scene("corridor", a.sigma, seed=a.seed, n_true=a.n_true, n_false=a.n_false, laps=laps)
+    s.keyframes = s.keyframes[:a.keyframes]
+    s.truth = s.truth[:a.keyframes]
+    s.candidates = [c for c in s.candidates if c.query < a.keyframes]
+    n = len(s.keyframes)
+    fifth = n // 5
+    clean = faults.inject_all(s, "clean", [])
+    faulty = faults.inject_all(s, "faulty", [
+        faults._late(fifth, 1000.0),
+        faults._frozen_stretch(2 * fifth, 50),
+        faults._deleted(3 * fifth),
+        faults._burst(4 * fifth, 300),
+    ])
+    what = (f"keyframe {fifth} stamped 1000 s late; keyframes {2 * fifth}..{2 * fifth + 49} with one stamp; "
+            f"keyframe {3 * fifth} never sent; keyframes {4 * fifth}..{4 * fifth + 299} and their candidates at once")
+    return s, clean, faulty, what
+
+
+class DiskEpisode:
+    """A tmpfs for the verdict log that a filler file fills between two verdict counts."""
+
+    def __init__(self, size_kb):
+        self.dir = tempfile.mkdtemp(prefix="rover_fault_disk_")
+        self.mounted = False
+        self.why_not = ""
+        if os.geteuid() != 0:
+            self.why_not = "not root: no tmpfs can be mounted (the full-disk episode is left out)"
+            return
+        r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_kb}k", "tmpfs", self.dir],
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            self.why_not = "mount tmpfs failed: " + r.stderr.strip()
+            return
+        self.mounted = True
+        self.filler = os.path.join(self.dir, "filler")
+        self.state = "before"
+
+    def step(self, done, start, end):
+        """Fill the disk when `done` reaches start, free it when it reaches end."""
+        if not self.mounted:
+            return
+        if self.state == "before" and done >= start:
+            fd = os.open(self.filler, os.O_WRONLY | os.O_CREAT, 0o600)
+            try:
+                while os.write(fd, b"\0" * 4096) > 0:
+                    pass
+            except OSError:  # full
+                pass
+            finally:
+                os.close(fd)
+            self.state = "full"
+        elif self.state == "full" and done >= end:
+            os.remove(self.filler)
+            self.state = "freed"
+
+    def close(self):
+        if self.mounted:
+            subprocess.run(["umount", self.dir], check=False)
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def read_log(path):
+    """(rows, whole rows, header ok): a log row is whole when it has every column of the header."""
+    if not os.path.exists(path):
+        return 0, 0, False
+    with open(path, newline="") as f:
+        lines = f.read().splitlines()
+    if not lines:
+        return 0, 0, False
+    header = next(csv.reader([lines[0]]))
+    ok = header[:4] == ["query_stamp", "match_stamp", "query_index", "match_index"]
+    rows = list(csv.reader(lines[1:]))
+    whole = sum(1 for r in rows if len(r) == len(header))
+    return len(rows), whole, ok
+
+
+def run_node(a, run, name, messages, labels, n_cand, env, out_dir, queue_size, disk=None):
+    """Plays `messages` into a fresh node; returns a dict of figures."""
+    import rospy
+    from roverlib import bag_replay
+    os.makedirs(out_dir, exist_ok=True)
+    bag_path = os.path.join(out_dir, "run.bag")
+    rbag.write_messages(messages, bag_path)
+    log = os.path.join(disk.dir if disk and disk.mounted else out_dir, "verdicts.csv")
+    if os.path.exists(log):
+        os.remove(log)
+    node_out = open(os.path.join(out_dir, "node.txt"), "w")
+    node = subprocess.Popen(
+        ["rosrun", "rover_loop_fusion", "rover_verifier_node", f"__name:={name}", f"_verdict_log:={log}",
+         "_optimize_period:=0", "_publish_markers:=false", f"_queue_size:={queue_size}"],
+        env=env, stdout=node_out, stderr=subprocess.STDOUT, start_new_session=True)
+    client = bag_replay.VerifierClient("/" + name)
+    deadline = time.time() + 60
+    while not client.connected() and time.time() < deadline:
+        time.sleep(0.1)
+    start = time.time()
+    play = subprocess.Popen(["rosbag", "play", "-q", "--wait-for-subscribers", "--queue=100000", "-r", str(a.rate),
+                             bag_path], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    last, last_change = -1, time.time()
+    try:
+        while True:
+            with client._cond:
+                done = len(client.verdicts) + sum(len(h) for h in client.pending.values())
+            if disk:
+                disk.step(done, int(0.45 * n_cand), int(0.55 * n_cand))
+            if done != last:
+                last, last_change = done, time.time()
+            if done >= n_cand and play.poll() is not None:
+                break
+            if play.poll() is not None and time.time() - last_change > 60:
+                break
+            if rospy.is_shutdown():
+                break
+            time.sleep(0.2)
+        wall = time.time() - start
+    finally:
+        for p in (play, node):
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGINT)
+        for p in (play, node):
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+        node_out.close()
+    rows, whole, header = read_log(log)
+    if disk and disk.mounted:
+        shutil.copy(log, os.path.join(out_dir, "verdicts.csv"))
+    with client._cond:
+        finals = list(client.verdicts)
+        held = sum(len(h) for h in client.pending.values())
+        n_msgs = len(client.messages)
+    tp = sum(1 for v in finals if v.accepted and labels.get((v.query_index, v.match_index)) == 1)
+    fp = sum(1 for v in finals if v.accepted and labels.get((v.query_index, v.match_index)) == 0)
+    n_true = sum(1 for lab in labels.values() if lab == 1)
+    text = open(os.path.join(out_dir, "node.txt")).read()
+    lost_lines = [l for l in text.splitlines() if "verdict rows were not written" in l or "verdict rows lost" in l]
+    reasons = {}
+    for v in finals:
+        reasons[v.reason] = reasons.get(v.reason, 0) + 1
+    return dict(run=run, verdicts=len(finals), held=held, messages=n_msgs, candidates=n_cand, tp=tp, fp=fp, n_true=n_true,
+                recall=tp / n_true if n_true else float("nan"), wall=wall, rows=rows, whole=whole, header=header,
+                lost=lost_lines[-1].split("]: ", 1)[-1] if lost_lines else "none reported",
+                reasons=reasons, raised="raised to" in text and "queue_size" in text)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--keyframes", type=int, default=20000)
+    ap.add_argument("--true", dest="n_true", type=int, default=500)
+    ap.add_argument("--false", dest="n_false", type=int, default=500)
+    ap.add_argument("--rate", type=float, default=40.0, help="rosbag play -r (keyframes every 0.5 s of bag time)")
+    ap.add_argument("--sigma", type=float, default=0.03)
+    ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--disk-kb", type=int, default=4096, help="size of the tmpfs holding the faulty run's log")
+    ap.add_argument("--out", default=os.path.join(bench.RESULTS, "fault_replay"))
+    a = ap.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    t0 = time.time()
+    s, clean, faulty, what = make_runs(a)
+    print(f"scenario: corridor sigma {a.sigma:g} seed {a.seed}, {len(s.keyframes)} keyframes, "
+          f"{len(s.candidates)} candidates ({sum(c.label == 1 for c in s.candidates)} true), made in "
+          f"{time.time() - t0:.0f} s\nfaults: {what}", flush=True)
+
+    env = dict(os.environ, ROS_MASTER_URI=f"http://127.0.0.1:{free_port()}")
+    os.environ["ROS_MASTER_URI"] = env["ROS_MASTER_URI"]
+    port = env["ROS_MASTER_URI"].rsplit(":", 1)[1]
+    core = subprocess.Popen(["roscore", "-p", port], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    disk = DiskEpisode(a.disk_kb)
+    results = []
+    try:
+        time.sleep(3)
+        subprocess.run(["rosparam", "load", bench.config_path("indoor"), "/rover_clean/rover"], env=env, check=True)
+        subprocess.run(["rosparam", "load", bench.config_path("indoor"), "/rover_faulty/rover"], env=env, check=True)
+        import rospy
+        rospy.init_node("fault_replay", disable_signals=True)
+        for run, f, name, queue, d in (("clean", clean, "rover_clean", 100000, None),
+                                       ("faulty", faulty, "rover_faulty", 10, disk)):
+            labels = {(c.query, c.match): c.label for c in f.scenario.candidates}
+            r = run_node(a, run, name, f.messages, labels, len(f.scenario.candidates), env,
+                         os.path.join(a.out, run), queue, d)
+            results.append(r)
+            print(f"{run}: {r['verdicts']} final verdicts (+{r['held']} held at the end) of {r['candidates']} "
+                  f"candidates in {r['wall']:.0f} s", flush=True)
+    finally:
+        disk.close()
+        os.killpg(core.pid, signal.SIGINT)
+        core.wait(timeout=30)
+
+    c, f = results
+    lines = [f"fault replay: corridor sigma {a.sigma:g} seed {a.seed}, {len(s.keyframes)} keyframes, "
+             f"{len(s.candidates)} candidates, rosbag play -r {a.rate:g}, shipped indoor YAML",
+             f"  faults: {what}; full disk: " +
+             (f"the faulty run's log on a {a.disk_kb} kB tmpfs, filled while candidates 45 %..55 % were decided"
+              if disk.mounted else disk.why_not),
+             "  run     verdicts (final+held at the end/candidates)  true acc  false acc  recall   log rows (whole, header)  lost rows (node)"]
+    for r in results:
+        lines.append(f"  {r['run']:7s} {r['verdicts']:>6d}+{r['held']}/{r['candidates']:<6d}                  {r['tp']:>5d}/{r['n_true']:<5d}"
+                     f"  {r['fp']:>5d}    {r['recall']:.3f}    {r['rows']} ({r['whole']} whole, header "
+                     f"{'ok' if r['header'] else 'MISSING'})   {r['lost']}")
+        lines.append("          reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(r["reasons"].items())))
+    lines.append(f"  recall faulty - clean: {f['recall'] - c['recall']:+.3f}; queue_size 10 raised with a warning: "
+                 f"{'yes' if f['raised'] else 'no'}")
+    text = "\n".join(lines)
+    print(text)
+    with open(os.path.join(a.out, "summary.txt"), "w") as out:
+        out.write(text + "\n")
+    ok = all(r["verdicts"] + r["held"] == r["candidates"] and r["rows"] == r["whole"] and r["header"] for r in results)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
