@@ -102,15 +102,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   VerifierConfig cfg;
   cfg.mode = in.ConsumeBool() ? Mode::kFourDof : Mode::kSixDof;
   cfg.alignment = in.ConsumeBool() ? Alignment::kSE3 : Alignment::kSim3;
-  cfg.accept_without_prior = in.ConsumeBool();
-  cfg.window_margin = in.ConsumeIntegralInRange<int>(0, 3);
-  cfg.odometry_neighbours = in.ConsumeIntegralInRange<int>(1, 4);
-  cfg.threshold_per_metre = in.ConsumeBool() ? 0.01 : 0.0;
-  cfg.anchor_incoming_keyframes = in.ConsumeBool();
-  cfg.max_keyframe_jump = in.ConsumeBool() ? 10.0 : 2.0;  // 2 m: segments (relocations) are frequent
-  cfg.jump_confirmations = in.ConsumeIntegralInRange<int>(2, 4);
-  cfg.max_iterations = 8;      // keep one input fast
-  cfg.time_budget_ms = 50.0;
+  cfg.host.accept_without_prior = in.ConsumeBool();
+  cfg.trial.window_margin = in.ConsumeIntegralInRange<int>(0, 3);
+  cfg.trial.odometry_neighbours = in.ConsumeIntegralInRange<int>(1, 4);
+  cfg.metric.threshold_per_metre = in.ConsumeBool() ? 0.01 : 0.0;
+  cfg.host.anchor_incoming_keyframes = in.ConsumeBool();
+  cfg.input.max_keyframe_jump = in.ConsumeBool() ? 10.0 : 2.0;  // 2 m: segments (relocations) are frequent
+  cfg.input.jump_confirmations = in.ConsumeIntegralInRange<int>(2, 4);
+  cfg.trial.max_iterations = 8;      // keep one input fast
+  cfg.trial.time_budget_ms = 50.0;
   Verifier v(cfg);
   CHECK(v.configError().empty());
 

@@ -45,7 +45,7 @@ Eigen::Matrix4d KeyframeGraph::Impl::unitLoopCovariance() const {
 
 Eigen::Matrix4d KeyframeGraph::Impl::unitStepCovariance() const {
   double stiffness = 0.0;
-  for (int k = 1; k <= cfg.odometry_neighbours; ++k) stiffness += k * k;
+  for (int k = 1; k <= cfg.trial.odometry_neighbours; ++k) stiffness += k * k;
   Eigen::Matrix4d C = Eigen::Matrix4d::Identity() / stiffness;
   C(3, 3) /= kYawResidualScale * kYawResidualScale;
   return C;
@@ -106,8 +106,8 @@ std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(i
 
 bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& extra, const CondenseOptions& o,
                                    CondensedGraph* cg, std::vector<size_t>* anchors) const {
-  const std::vector<LoopRep> reps = o.trial ? loopReps(component, o.first, cfg.trial_loop_anchors)
-                                            : loopReps(component, 0, cfg.max_loop_anchors);
+  const std::vector<LoopRep> reps = o.trial ? loopReps(component, o.first, cfg.trial.trial_loop_anchors)
+                                            : loopReps(component, 0, cfg.chi2.max_loop_anchors);
   std::vector<size_t>& a = *anchors;
   a = extra;
   for (const LoopRep& r : reps) {
@@ -147,7 +147,7 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
     e.yaw = r.loop->relative_yaw;
     e.covariance = L / r.count;
     e.count = r.count;
-    if (o.trial) e.huber = cfg.loop_huber;
+    if (o.trial) e.huber = cfg.trial.loop_huber;
     if (!cg->addEdge(e)) return false;
   }
   return true;
@@ -243,12 +243,12 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std:
     e.t = l.candidate->relative_t;
     e.yaw = l.candidate->relative_yaw;
     e.covariance = unitLoopCovariance();
-    if (robust_candidate) e.huber = cfg.loop_huber;
+    if (robust_candidate) e.huber = cfg.trial.loop_huber;
     if (!cg.addEdge(e)) return false;
   }
   bool ok = false, converged = false;
   const int iterations =
-      cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.function_tolerance);
+      cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
   if (!ok) return false;
   out->condensed = true;
   out->first = head;

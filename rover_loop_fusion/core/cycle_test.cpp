@@ -88,7 +88,7 @@ int cycleTest(const KeyframeGraph& graph, const VerifierConfig& config, double d
     for (int d = 0; d < 4; ++d) J.col(d) = (residual(k, h * Eigen::Vector4d::Unit(d)) - r) / h;
     S += J * f[k].cov * J.transpose();
   }
-  return mahalanobis(r, S) <= chiSquareQuantile(config.gate_probability, 4) ? 1 : 0;
+  return mahalanobis(r, S) <= chiSquareQuantile(config.chi2.gate_probability, 4) ? 1 : 0;
 }
 
 }  // namespace core

@@ -26,17 +26,17 @@ Check fail(Reason reason, std::string detail) {
 }  // namespace
 
 double scoreThreshold(const VerifierConfig& config, double path_length) {
-  double threshold = config.threshold;
-  if (config.threshold_per_metre > 0 && std::isfinite(path_length)) {
-    threshold += config.threshold_per_metre * path_length;
-    if (config.max_threshold > 0) threshold = std::min(threshold, config.max_threshold);
+  double threshold = config.metric.threshold;
+  if (config.metric.threshold_per_metre > 0 && std::isfinite(path_length)) {
+    threshold += config.metric.threshold_per_metre * path_length;
+    if (config.metric.max_threshold > 0) threshold = std::min(threshold, config.metric.max_threshold);
   }
   return threshold;
 }
 
 Check innovationGate(const VerifierConfig& config, double innovation, double path_length) {
-  if (!(config.max_innovation > 0)) return Check();
-  const double bound = config.max_innovation + config.max_innovation_per_metre * path_length;
+  if (!(config.metric.max_innovation > 0)) return Check();
+  const double bound = config.metric.max_innovation + config.metric.max_innovation_per_metre * path_length;
   std::ostringstream s;
   s.precision(3);
   if (!std::isfinite(innovation) || !std::isfinite(path_length) || !std::isfinite(bound)) {
@@ -45,8 +45,8 @@ Check innovationGate(const VerifierConfig& config, double innovation, double pat
     return fail(Reason::kInvalidInput, s.str());
   }
   if (innovation <= bound) return Check();
-  s << std::fixed << "innovation " << innovation << " m > " << bound << " m (" << config.max_innovation
-    << " m + " << config.max_innovation_per_metre << " x " << path_length
+  s << std::fixed << "innovation " << innovation << " m > " << bound << " m (" << config.metric.max_innovation
+    << " m + " << config.metric.max_innovation_per_metre << " x " << path_length
     << " m of path): more than drift can explain";
   return fail(Reason::kInnovationAboveBound, s.str());
 }
@@ -153,20 +153,20 @@ Check chi2Test(const VerifierConfig& config, const Eigen::Vector4d& nu, const Ei
                Chi2Numbers* numbers) {
   Chi2Numbers& n = *numbers;
   n.d2 = mahalanobis(nu, S);
-  n.gate = chiSquareQuantile(config.gate_probability, 4);
+  n.gate = chiSquareQuantile(config.chi2.gate_probability, 4);
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (S.topLeftCorner<3, 3>() + S.topLeftCorner<3, 3>().transpose()));
   n.sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
-  n.margin = lookalikeMargin(nu, S, config.lookalike_distance, config.lookalike_distance_vertical);
+  n.margin = lookalikeMargin(nu, S, config.chi2.lookalike_distance, config.chi2.lookalike_distance_vertical);
   std::ostringstream s;
   s.precision(3);
   s << std::fixed << "innovation " << nu.head<3>().norm() << " m, " << std::abs(nu[3]) * 180.0 / M_PI
     << " deg; Mahalanobis d2 " << n.d2 << (n.d2 <= n.gate ? " <= " : " > ") << n.gate << " (chi2 "
-    << config.gate_probability << "); relative position std up to " << n.sigma << " m";
+    << config.chi2.gate_probability << "); relative position std up to " << n.sigma << " m";
   if (!(n.d2 <= n.gate)) return fail(Reason::kInconsistentWithDrift, s.str() + ": more than drift explains");
   if (std::isfinite(n.margin)) s << "; look-alike margin " << n.margin;
-  if (!(n.margin >= config.lookalike_margin)) {
-    s << " < " << config.lookalike_margin << ": a look-alike " << config.lookalike_distance << " m (horizontal) / "
-      << config.lookalike_distance_vertical << " m (vertical) away explains it as well";
+  if (!(n.margin >= config.chi2.lookalike_margin)) {
+    s << " < " << config.chi2.lookalike_margin << ": a look-alike " << config.chi2.lookalike_distance << " m (horizontal) / "
+      << config.chi2.lookalike_distance_vertical << " m (vertical) away explains it as well";
     return fail(Reason::kLookalikeCloser, s.str());
   }
   Check passed;

@@ -41,7 +41,7 @@ class MetricRule : public DecisionRule {
   Status updateEstimate(size_t first, size_t newest, double time_budget_ms) override {
     if (graph_.sequenceAt(first) == 0 && graph_.sequenceAt(newest) == 0) return Status::Ok();  // both fixed
     const TrialSolution s =
-        graph_.solveWindow(first, newest, nullptr, false, config_.max_iterations, time_budget_ms);
+        graph_.solveWindow(first, newest, nullptr, false, config_.trial.max_iterations, time_budget_ms);
     if (!s.summary.finite) return Status::Error(s.summary.message);  // X keeps its old values
     graph_.adopt(s);  // a solve stopped by the budget still moved X towards the loops
     if (s.summary.timed_out) return Status::Warning(s.summary.message);
@@ -63,7 +63,7 @@ class DriftCalibration {
 
   void add(const Eigen::Vector4d& innovation, const Eigen::Matrix4d& chain_covariance) {
     samples_.push_back({innovation, chain_covariance});
-    if (config_.calibrate_drift) refit();
+    if (config_.drift.calibrate_drift) refit();
   }
 
  private:
@@ -136,11 +136,11 @@ class Chi2Rule : public DecisionRule {
     measured->threshold = std::numeric_limits<double>::quiet_NaN();
     measured->converged = true;
     if (!out.check.passed) return out;
-    if (config_.hold_sigma > 0 && n.sigma > config_.hold_sigma) {
+    if (config_.chi2.hold_sigma > 0 && n.sigma > config_.chi2.hold_sigma) {
       std::ostringstream s;
       s.precision(3);
       s << std::fixed << out.check.detail << "; held: the prior alone is too weak (std " << n.sigma
-        << " m > hold_sigma " << config_.hold_sigma << " m) until " << config_.confirm_count
+        << " m > hold_sigma " << config_.chi2.hold_sigma << " m) until " << config_.hold.confirm_count
         << " candidates of this revisit agree";
       out.check.detail = s.str();
       out.hold = true;
@@ -213,13 +213,13 @@ class RevisitRule : public MetricRule {
     Chi2Numbers n;
     chi2Test(cfg_, nu, C + g_.loopCovariance(), &n);
     out.d2 = n.d2;
-    const double reject = chiSquareQuantile(cfg_.revisit_reject_probability, 4);
+    const double reject = chiSquareQuantile(cfg_.revisit.revisit_reject_probability, 4);
     measured->d2 = n.d2;
     measured->gate = reject;
     std::ostringstream s;
     s.precision(3);
     s << std::fixed << out.check.detail << "; Mahalanobis d2 " << n.d2 << (n.d2 <= reject ? " <= " : " > ") << reject
-      << " (chi2 " << cfg_.revisit_reject_probability << ", drift scale " << calibration_.scale()
+      << " (chi2 " << cfg_.revisit.revisit_reject_probability << ", drift scale " << calibration_.scale()
       << "; relative position std up to " << n.sigma << " m)";
     if (!(n.d2 <= reject)) {
       out.check.detail = s.str() + ": no drift explains it";
@@ -262,22 +262,22 @@ class RevisitRule : public MetricRule {
     s << std::fixed << "revisit hypothesis of " << group.size() << " (loops " << group.front().candidate.query_index
       << "->" << group.front().candidate.match_index << " .. " << group.back().candidate.query_index << "->"
       << group.back().candidate.match_index << "): ";
-    if (d2.size() < static_cast<size_t>(cfg_.revisit_support)) {
+    if (d2.size() < static_cast<size_t>(cfg_.revisit.revisit_support)) {
       s << "fewer than revisit_support members have a prior now";
       *why = s.str();
       return false;
     }
-    if (cfg_.revisit_max_sigma > 0 && sigma > cfg_.revisit_max_sigma) {
+    if (cfg_.revisit.revisit_max_sigma > 0 && sigma > cfg_.revisit.revisit_max_sigma) {
       s << "the prior is too weak to tell a revisit from a look-alike row (relative position std up to " << sigma
-        << " m > revisit_max_sigma " << cfg_.revisit_max_sigma << " m)";
+        << " m > revisit_max_sigma " << cfg_.revisit.revisit_max_sigma << " m)";
       *why = s.str();
       return false;
     }
     std::nth_element(d2.begin(), d2.begin() + d2.size() / 2, d2.end());
     const auto& median = d2[d2.size() / 2];
-    const double gate = chiSquareQuantile(cfg_.revisit_gate_probability, 4);
+    const double gate = chiSquareQuantile(cfg_.revisit.revisit_gate_probability, 4);
     if (!(median.first <= gate)) {
-      s << "median Mahalanobis d2 " << median.first << " > " << gate << " (chi2 " << cfg_.revisit_gate_probability
+      s << "median Mahalanobis d2 " << median.first << " > " << gate << " (chi2 " << cfg_.revisit.revisit_gate_probability
         << "): more than drift explains";
       *why = s.str();
       return false;
@@ -285,15 +285,15 @@ class RevisitRule : public MetricRule {
     // The trial with all its loops: how far the trajectory has to bend for this revisit.
     std::vector<LoopCandidate> loops;
     for (const auto& d : d2) loops.push_back(d.second->candidate);
-    const TrialSolution trial = g_.solveWindow(loops, cfg_.robust_candidate, cfg_.max_iterations, 0.0);
+    const TrialSolution trial = g_.solveWindow(loops, cfg_.trial.robust_candidate, cfg_.trial.max_iterations, 0.0);
     Eigen::Matrix3Xd before, after;
     const int n = g_.scoredPositions(trial, &before, &after);
     const double score = trial.summary.finite ? deformationScore(before, after, cfg_.alignment)
                                               : std::numeric_limits<double>::quiet_NaN();
-    const double bound = std::max(cfg_.threshold, cfg_.revisit_score_sigmas * sigma);
+    const double bound = std::max(cfg_.metric.threshold, cfg_.revisit.revisit_score_sigmas * sigma);
     s << "median d2 " << median.first << " <= " << gate << "; trial with its " << loops.size() << " loops: score "
       << score << " m over " << n
-      << " keyframes, bound " << bound << " m (max of threshold and " << cfg_.revisit_score_sigmas << " x std "
+      << " keyframes, bound " << bound << " m (max of threshold and " << cfg_.revisit.revisit_score_sigmas << " x std "
       << sigma << " m)";
     *why = s.str();
     return trial.summary.converged && trial.summary.finite && score <= bound;
@@ -337,8 +337,8 @@ Check metricDecision(const VerifierConfig& config, KeyframeGraph& graph, const L
 
   // The budget counts from the call: what the checks above took is spent.
   const double budget_left =
-      config.time_budget_ms > 0 ? std::max(1e-3, config.time_budget_ms - msSince(t0)) : 0.0;
-  *trial = graph.solveWindow(mpos, qpos, &c, config.robust_candidate, config.max_iterations, budget_left,
+      config.trial.time_budget_ms > 0 ? std::max(1e-3, config.trial.time_budget_ms - msSince(t0)) : 0.0;
+  *trial = graph.solveWindow(mpos, qpos, &c, config.trial.robust_candidate, config.trial.max_iterations, budget_left,
                              condense_min_window);
   const SolveSummary& o = trial->summary;
   measured->iterations = o.iterations;
@@ -349,7 +349,7 @@ Check metricDecision(const VerifierConfig& config, KeyframeGraph& graph, const L
   measured->window_size = graph.scoredPositions(*trial, &before, &after);
   if (o.finite) measured->score = deformationScore(before, after, config.alignment);
 
-  Check score = scoreTest(o, measured->score, measured->threshold, measured->window_size, config.time_budget_ms);
+  Check score = scoreTest(o, measured->score, measured->threshold, measured->window_size, config.trial.time_budget_ms);
   if (trial->condensed) score.detail += " (" + o.message + ")";
   return score;
 }

@@ -40,8 +40,8 @@ void KeyframeGraph::Impl::rebuildMoments(int sequence) {
 
 Eigen::Matrix4d KeyframeGraph::Impl::loopCovariance() const {
   Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
-  C(0, 0) = C(1, 1) = C(2, 2) = cfg.loop_sigma * cfg.loop_sigma;
-  C(3, 3) = cfg.loop_sigma_yaw * cfg.loop_sigma_yaw;
+  C(0, 0) = C(1, 1) = C(2, 2) = cfg.drift.loop_sigma * cfg.drift.loop_sigma;
+  C(3, 3) = cfg.drift.loop_sigma_yaw * cfg.drift.loop_sigma_yaw;
   return C;
 }
 

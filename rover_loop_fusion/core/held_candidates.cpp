@@ -13,8 +13,8 @@ size_t distance(size_t x, size_t y) { return x > y ? x - y : y - x; }
 
 void HeldCandidates::add(const HeldCandidate& h,
                          const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent) {
-  const size_t window = static_cast<size_t>(h.kind == HoldKind::kRevisit ? config_.revisit_stretch : config_.confirm_stretch);
-  const size_t k = static_cast<size_t>(config_.confirm_count);
+  const size_t window = static_cast<size_t>(h.kind == HoldKind::kRevisit ? config_.revisit.revisit_stretch : config_.hold.confirm_stretch);
+  const size_t k = static_cast<size_t>(config_.hold.confirm_count);
   for (HeldGroup& g : groups_) {
     const HeldCandidate& f = g.front();
     if (f.kind != h.kind || f.query_segment != h.query_segment || f.match_segment != h.match_segment) continue;
@@ -53,9 +53,9 @@ void HeldCandidates::releaseDropping(size_t i, const Actions& act, const std::st
 
 void HeldCandidates::settle(size_t now, const Actions& act) {
   now_ = now;
-  const size_t k = static_cast<size_t>(config_.confirm_count);
-  const size_t window = static_cast<size_t>(config_.confirm_window);    // expiry
-  const size_t stretch = static_cast<size_t>(config_.confirm_stretch);  // how close rival groups are
+  const size_t k = static_cast<size_t>(config_.hold.confirm_count);
+  const size_t window = static_cast<size_t>(config_.hold.confirm_window);    // expiry
+  const size_t stretch = static_cast<size_t>(config_.hold.confirm_stretch);  // how close rival groups are
   for (size_t i = 0; i < groups_.size();) {
     HeldGroup& g = groups_[i];
     if (g.front().kind == HoldKind::kRevisit) {
@@ -70,7 +70,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
       // Confirmed once revoke_group agree and they outnumber the loops they contradict (until
       // then more rivals may join, or the window runs out).
       std::vector<LoopCandidate> targets;
-      if (g.size() >= static_cast<size_t>(config_.revoke_group) && g.size() > (targets = act.rival_targets(g)).size()) {
+      if (g.size() >= static_cast<size_t>(config_.hold.revoke_group) && g.size() > (targets = act.rival_targets(g)).size()) {
         HeldGroup rivals;
         rivals.swap(g);
         groups_.erase(groups_.begin() + i);
@@ -101,7 +101,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
     if (now > g.front().arrived + window) {
       std::ostringstream s;
       if (g.front().kind == HoldKind::kRival)
-        s << "a rival of accepted loops, not confirmed by revoke_group=" << config_.revoke_group
+        s << "a rival of accepted loops, not confirmed by revoke_group=" << config_.hold.revoke_group
           << " agreeing candidates within confirm_window=" << window << " keyframes: nothing revoked";
       else
         s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
@@ -115,15 +115,15 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
 }
 
 bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
-  const size_t stretch = static_cast<size_t>(config_.revisit_stretch);
-  const size_t now_window = static_cast<size_t>(config_.revisit_window);
+  const size_t stretch = static_cast<size_t>(config_.revisit.revisit_stretch);
+  const size_t now_window = static_cast<size_t>(config_.revisit.revisit_window);
   HeldGroup& g = groups_[i];
   auto near = [&](const HeldGroup& a, const HeldGroup& b) {
     // Two hypotheses of one revisit: some queries of the two lie within the stretch.
     const size_t a0 = a.front().query_pos, a1 = a.back().query_pos, b0 = b.front().query_pos, b1 = b.back().query_pos;
     return !(a1 + stretch < b0 || b1 + stretch < a0);
   };
-  if (g.size() >= static_cast<size_t>(config_.revisit_support)) {
+  if (g.size() >= static_cast<size_t>(config_.revisit.revisit_support)) {
     std::string why;
     if (!act.judge(g, &why)) {
       const HeldGroup failed = g;
@@ -134,13 +134,13 @@ bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
     // Rival hypotheses of the same revisit compete by fit and support: the release waits until
     // this one is better than every rival by revisit_margin (or the window runs out).
     auto misfit = [&](const HeldGroup& h) {
-      return act.misfit(h) - config_.revisit_member_weight * static_cast<double>(h.size() - 1);
+      return act.misfit(h) - config_.revisit.revisit_member_weight * static_cast<double>(h.size() - 1);
     };
     const double mine = misfit(g);
     bool blocked = false;
     for (size_t j = 0; j < groups_.size() && !blocked; ++j)
       if (j != i && groups_[j].front().kind == HoldKind::kRevisit && near(groups_[j], g) &&
-          !(mine + config_.revisit_margin < misfit(groups_[j])))
+          !(mine + config_.revisit.revisit_margin < misfit(groups_[j])))
         blocked = true;
     if (!blocked) {
       // The rivals of the released hypothesis contradict it: dropped.
@@ -153,7 +153,7 @@ bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
   }
   if (now_ > g.front().arrived + now_window) {
     std::ostringstream s;
-    s << "its revisit hypothesis (" << g.size() << " of revisit_support=" << config_.revisit_support
+    s << "its revisit hypothesis (" << g.size() << " of revisit_support=" << config_.revisit.revisit_support
       << " members) was not released within revisit_window=" << now_window << " keyframes";
     const HeldGroup expired = g;
     groups_.erase(groups_.begin() + i);

@@ -22,20 +22,20 @@ std::string KeyframeGraph::Impl::implausibleStep(const Keyframe& a, const Keyfra
   std::ostringstream s;
   s.precision(17);
   const double jump = (b.vio.t - a.vio.t).norm();
-  if (!(jump <= cfg.max_keyframe_jump)) {
+  if (!(jump <= cfg.input.max_keyframe_jump)) {
     s.precision(6);
     s << "position jumps " << jump << " m from keyframe " << a.index << " (max_keyframe_jump "
-      << cfg.max_keyframe_jump << " m)";
+      << cfg.input.max_keyframe_jump << " m)";
     s.precision(17);
   }
   const double dt = b.stamp - a.stamp;
-  if (!(dt > 0.0) || !(dt <= cfg.max_stamp_jump)) {
+  if (!(dt > 0.0) || !(dt <= cfg.input.max_stamp_jump)) {
     if (!s.str().empty()) s << "; ";
     if (!(dt > 0.0))
       s << "out of order: stamp " << b.stamp << " not after the previous keyframe's " << a.stamp << " in sequence " << a.sequence;
     else
       s << "stamp " << b.stamp << " is " << dt << " s after keyframe " << a.index << "'s (max_stamp_jump "
-        << cfg.max_stamp_jump << " s)";
+        << cfg.input.max_stamp_jump << " s)";
   }
   return s.str();
 }
@@ -54,7 +54,7 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     return Status::Error(s.str());
   }
   if (!std::isfinite(stamp)) return Status::Error(who + "stamp is not finite");
-  if (!unitQuaternion(q, config_.quaternion_tolerance)) return Status::Error(who + "orientation is not a unit quaternion");
+  if (!unitQuaternion(q, config_.input.quaternion_tolerance)) return Status::Error(who + "orientation is not a unit quaternion");
   const Impl::Keyframe* prev = nullptr;  // the previous keyframe of this sequence
   if (!m.kfs.empty()) {
     const Impl::Keyframe& last = m.kfs.back();
@@ -71,7 +71,7 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
   kf.sequence = sequence;
   kf.segment = prev ? prev->segment : sequence;
   kf.vio = Pose(t, q.normalized());
-  if (config_.anchor_incoming_keyframes) {
+  if (config_.host.anchor_incoming_keyframes) {
     auto shift = m.seq_shift.find(sequence);
     if (shift != m.seq_shift.end()) kf.vio = m.applyCorrection(shift->second, kf.vio);
   }
@@ -97,7 +97,7 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     // Three stamp faults are told apart from a jump first (one stamp policy for every host):
     // a repeated message, a clock that stopped, and one keyframe stamped late.
     std::string implausible = m.implausibleStep(*prev, kf);
-    const bool step_ok = (kf.vio.t - prev->vio.t).norm() <= config_.max_keyframe_jump;
+    const bool step_ok = (kf.vio.t - prev->vio.t).norm() <= config_.input.max_keyframe_jump;
     if (!implausible.empty() && step_ok && stamp == prev->stamp) {
       const bool same_pose = kf.vio.t == prev->vio.t && kf.vio.q.coeffs() == prev->vio.q.coeffs();
       if (same_pose)
@@ -136,10 +136,10 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
       const bool follows = sp.run > 0 && sp.keyframe.sequence == sequence &&
                            m.implausibleStep(sp.keyframe, kf).empty();
       const int run = follows ? sp.run + 1 : 1;
-      if (run < config_.jump_confirmations) {
+      if (run < config_.input.jump_confirmations) {
         sp.run = run;
         sp.keyframe = kf;
-        const int more = config_.jump_confirmations - run;
+        const int more = config_.input.jump_confirmations - run;
         return Status::Error(who + implausible + ": refused; " + std::to_string(more) + " more consecutive " +
                              (more == 1 ? "keyframe" : "keyframes") +
                              " consistent with it would be taken as a relocation (jump_confirmations)");
@@ -200,7 +200,7 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     }
   }
   m.appendMoments(pos);
-  const int n = std::max(0, config_.odometry_neighbours);
+  const int n = std::max(0, config_.trial.odometry_neighbours);
   for (int j = n; j >= 1; --j) {
     if (pos < static_cast<size_t>(j)) continue;
     const size_t from = pos - j;

@@ -159,19 +159,19 @@ std::string KeyframeGraph::Impl::checkLoop(const LoopCandidate& c, size_t* qpos,
            describeIndex(c.query_index);
   if (!c.relative_t.allFinite() || !std::isfinite(c.relative_yaw))
     return "relative pose is not finite";
-  if (!unitQuaternion(c.relative_q, cfg.quaternion_tolerance))
+  if (!unitQuaternion(c.relative_q, cfg.input.quaternion_tolerance))
     return "relative rotation is not a unit quaternion";
-  if (c.relative_t.norm() > cfg.max_relative_translation) {
+  if (c.relative_t.norm() > cfg.input.max_relative_translation) {
     std::ostringstream s;
     s << "relative translation " << c.relative_t.norm() << " m exceeds max_relative_translation "
-      << cfg.max_relative_translation << " m";
+      << cfg.input.max_relative_translation << " m";
     return s.str();
   }
   // The yaw as handed in is what the loop edge uses: checked unwrapped (20 pi is not 0).
-  if (!(std::abs(c.relative_yaw) <= cfg.max_relative_yaw)) {
+  if (!(std::abs(c.relative_yaw) <= cfg.input.max_relative_yaw)) {
     std::ostringstream s;
     s << "relative yaw " << c.relative_yaw * 180.0 / M_PI << " deg exceeds max_relative_yaw "
-      << cfg.max_relative_yaw * 180.0 / M_PI << " deg";
+      << cfg.input.max_relative_yaw * 180.0 / M_PI << " deg";
     return s.str();
   }
   return std::string();

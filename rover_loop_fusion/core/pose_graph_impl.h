@@ -142,13 +142,13 @@ struct KeyframeGraph::Impl {
   CostRate iteration_cost{0.030};
 
   explicit Impl(const VerifierConfig& c)
-      : cfg(c), huber(new ceres::HuberLoss(c.loop_huber)),
+      : cfg(c), huber(new ceres::HuberLoss(c.trial.loop_huber)),
         angle_manifold(new compat::AngleManifold()),
         quaternion_manifold(compat::newQuaternionManifold()) {
-    drift.sigma_xy = c.drift_xy;
-    drift.sigma_z = c.drift_z;
-    drift.sigma_yaw = c.drift_yaw;
-    drift.min_step = c.drift_min_step;
+    drift.sigma_xy = c.drift.drift_xy;
+    drift.sigma_z = c.drift.drift_z;
+    drift.sigma_yaw = c.drift.drift_yaw;
+    drift.min_step = c.drift.drift_min_step;
     if (!fourDof()) {  // autodiff 6-DoF residuals: 2-7x the 4-DoF cost (docs/results.md)
       setup_cost.mean *= 3;
       iteration_cost.mean *= 3;
@@ -252,7 +252,7 @@ struct KeyframeGraph::Impl {
   Eigen::Matrix4d unitLoopCovariance() const;
   Eigen::Matrix4d unitStepCovariance() const;
   /// Whether trials can be condensed (4-DoF with odometry; the unit moments are kept then).
-  bool condensable() const { return fourDof() && cfg.odometry_neighbours >= 1; }
+  bool condensable() const { return fourDof() && cfg.trial.odometry_neighbours >= 1; }
   /// The condensed trial (solveWindow) with the `candidates` (their loops as extra edges; a
   /// TrialLoop without a candidate only makes its ends anchors); false if it could not be built
   /// or solved.

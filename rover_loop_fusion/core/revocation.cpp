@@ -42,7 +42,7 @@ std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t
 }
 
 bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
-  if (config_.revoke_group <= 0) return false;
+  if (config_.hold.revoke_group <= 0) return false;
   if (reason != Reason::kInnovationAboveBound && reason != Reason::kScoreAboveThreshold &&
       reason != Reason::kInconsistentWithDrift)
     return false;
@@ -50,13 +50,13 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
-  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.confirm_stretch));
+  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.hold.confirm_stretch));
   if (against.empty()) return false;
   std::ostringstream s;
   s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
   for (size_t i = 0; i < against.size() && i < 3; ++i)
     s << (i ? ", " : "") << against[i].query_index << "->" << against[i].match_index;
-  s << (against.size() > 3 ? ", ..." : "") << "): held as a rival until revoke_group=" << config_.revoke_group
+  s << (against.size() > 3 ? ", ..." : "") << "): held as a rival until revoke_group=" << config_.hold.revoke_group
     << " agree";
   *detail = s.str();
   hold(c, qpos, mpos, HoldKind::kRival);
@@ -66,7 +66,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
 std::vector<LoopCandidate> Verifier::rivalTargets(const HeldGroup& group) const {
   std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
   for (const HeldCandidate& h : group)
-    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.confirm_stretch))) {
+    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.hold.confirm_stretch))) {
       auto& v = votes[{l.query_index, l.match_index}];
       v.first = l;
       ++v.second;
@@ -139,14 +139,14 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
   for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
   for (const HeldCandidate& h : group) fit_rivals.push_back(misfit(h.candidate));
   const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
-  const double gate = chiSquareQuantile(config_.gate_probability, 4);
-  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.revoke_margin < misfit_loops)) {
+  const double gate = chiSquareQuantile(config_.chi2.gate_probability, 4);
+  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.hold.revoke_margin < misfit_loops)) {
     std::ostringstream s;
     s.precision(3);
     s << what.str() << ", but they do not fit the graph without the " << loops.size()
       << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
       << "distance " << misfit_rivals << " vs " << misfit_loops << "; needed: within the gate " << gate
-      << " and lower by revoke_margin " << config_.revoke_margin << "): nothing revoked";
+      << " and lower by revoke_margin " << config_.hold.revoke_margin << "): nothing revoked";
     putBack(s.str());
     return;
   }
@@ -158,10 +158,10 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
     (ok ? passed : failed).push_back(&h);
   }
 
-  if (passed.size() >= static_cast<size_t>(config_.revoke_group) && passed.size() > loops.size()) {
+  if (passed.size() >= static_cast<size_t>(config_.hold.revoke_group) && passed.size() > loops.size()) {
     std::ostringstream revoked;
     revoked << what.str() << ", contradict it and pass against the graph without it (" << passed.size() << " of "
-            << group.size() << "; revoke_group=" << config_.revoke_group << ")";
+            << group.size() << "; revoke_group=" << config_.hold.revoke_group << ")";
     for (const LoopCandidate& l : loops) {
       revoked_.insert({l.query_index, l.match_index});
       decide(LoopDecision::Kind::kRevoke, l, Verdict::Reject(Reason::kRevoked, l, revoked.str()));
@@ -177,7 +177,7 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
   // Not enough of them pass: the graph as it was.
   std::ostringstream s;
   s << what.str() << ", but only " << passed.size() << " of them pass against the graph without the "
-    << loops.size() << " accepted loop(s) they contradict (revoke_group=" << config_.revoke_group << "): nothing revoked";
+    << loops.size() << " accepted loop(s) they contradict (revoke_group=" << config_.hold.revoke_group << "): nothing revoked";
   putBack(s.str());
 }
 

@@ -82,7 +82,7 @@ SolveSummary KeyframeGraph::Impl::solve(Trial& tr, int max_iterations, double ti
     options.update_state_every_iteration = true;  // a stopped solve keeps its last iterate
   }
   options.num_threads = 1;
-  options.function_tolerance = cfg.function_tolerance;
+  options.function_tolerance = cfg.trial.function_tolerance;
   options.logging_type = ceres::SILENT;
   options.minimizer_progress_to_stdout = false;
   ceres::Solver::Summary summary;
@@ -120,7 +120,7 @@ void KeyframeGraph::Impl::learnCost(size_t window, double total_ms, const Deadli
 }
 
 size_t KeyframeGraph::Impl::windowStart(size_t match_pos) const {
-  const size_t margin = static_cast<size_t>(std::max(0, cfg.window_margin));
+  const size_t margin = static_cast<size_t>(std::max(0, cfg.trial.window_margin));
   return match_pos > margin ? match_pos - margin : 0;
 }
 
@@ -176,7 +176,7 @@ TrialSolution KeyframeGraph::Impl::solveTrial(const std::vector<TrialLoop>& loop
   const size_t qpos = loops.back().query_pos;
   const size_t first = m.windowStart(mpos);
   const size_t window = m.kfs.size() - first;  // the trial's keyframes, at most
-  const int condense_above = condense_min_window >= 0 ? condense_min_window : m.cfg.condense_min_window;
+  const int condense_above = condense_min_window >= 0 ? condense_min_window : m.cfg.trial.condense_min_window;
   if (m.condensable() && condense_above > 0 && window > static_cast<size_t>(condense_above) &&
       m.solveCondensed(first, m.root(m.kfs[qpos].segment), loops, robust_candidate, max_iterations, &out))
     return out;

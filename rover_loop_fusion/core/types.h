@@ -50,7 +50,7 @@ enum class Reason {
   kNotConverged,         ///< the solver stopped without converging (or failed)
   kNoTrajectoryPrior,    ///< query and match are in sequences nothing connects yet
   kInvalidInput,         ///< the candidate or the graph state is not usable
-  kTimeBudgetExceeded,   ///< the solve ran past config.time_budget_ms
+  kTimeBudgetExceeded,   ///< the solve ran past config.trial.time_budget_ms
   kInconsistentWithDrift, ///< chi2: the innovation's Mahalanobis distance exceeds the gate
   kLookalikeCloser,      ///< chi2: a look-alike place at lookalike_distance explains it better
   kDeferred,             ///< held: neither accepted nor rejected yet; a LoopDecision follows
@@ -199,14 +199,12 @@ struct Status {
 /// report a refused commit this way, so that a verdict says what was committed.
 void rejectRefusedCommit(Verdict* v, const Status& commit);
 
-/// The verifier's parameters. Every field is a row of the parameter table (core/parameters.h:
-/// its YAML name, unit, range and doc); adding a field means adding its row there.
-struct VerifierConfig {
-  /// How candidates are decided: kMetric (threshold and innovation gate in metres, below) or
-  /// kChi2 (in units of drift: the fields from drift_xy on). See Decision.
-  Decision decision = Decision::kRevisit;
-  Mode mode = Mode::kFourDof;
-  Alignment alignment = Alignment::kSE3;
+// ---- the verifier's parameters (VerifierConfig), nested by concern --------------------------
+// Every field is a row of the parameter table (core/parameters.h: its YAML name, unit, range and
+// doc) and is named by its key; adding a field means adding its row there.
+
+/// The metric decision's tests, in metres (decision metric; revisit's fast path).
+struct MetricConfig {
   /// Accept iff score <= threshold + threshold_per_metre * path_length [m], where
   /// path_length is the odometry distance from the match to the query through the graph
   /// (accepted loops count zero): a true loop's score grows with the drift it corrects, and
@@ -225,9 +223,10 @@ struct VerifierConfig {
   /// (innovation ~ offset, path ~ metres). max_innovation = 0 disables the gate.
   double max_innovation = 0.5;
   double max_innovation_per_metre = 0.02;
-  /// Policy for candidates between sequences that nothing connects yet (no prior to test
-  /// against). true = accept as upstream loop_fusion does when merging maps.
-  bool accept_without_prior = true;
+};
+
+/// The trial optimisation: limits, graph and loss, condensed trials.
+struct TrialConfig {
   /// Trial optimisation limits. A solve that stops on either limit did not converge and the
   /// candidate is rejected (fail closed). time_budget_ms = 0 disables the time limit.
   int max_iterations = 50;
@@ -258,15 +257,14 @@ struct VerifierConfig {
   /// ones thinned): what bounds its cost. Thinning leaves the trial less stiff than the full
   /// window, so keep it above the loops a window usually holds.
   int trial_loop_anchors = 1024;
+};
+
+/// Plausibility of what a host hands in: candidates' relative poses, keyframe streams.
+struct InputLimits {
   /// Plausibility limits of a candidate's relative pose (loop_fusion's findConnection drops
   /// |t| >= 20 m and |yaw| >= 30 deg). Beyond them the candidate is invalid input.
   double max_relative_translation = 20.0;
   double max_relative_yaw = 30.0 * M_PI / 180.0;
-  /// true: keyframe poses arrive in the raw VIO frame of their sequence (the standalone node
-  /// fed from /vins_estimator/keyframe_pose) and the verifier applies the sequence anchoring
-  /// shift itself. false: the caller already did (patched loop_fusion hands poses after its
-  /// w_r_vio / w_t_vio shift).
-  bool anchor_incoming_keyframes = false;
   /// Tolerance on | |q| - 1 | for quaternions handed in.
   double quaternion_tolerance = 1e-3;
   /// Plausibility of the keyframe stream of a live sequence (not of sequence 0, a loaded map).
@@ -279,8 +277,26 @@ struct VerifierConfig {
   double max_keyframe_jump = 10.0;
   double max_stamp_jump = 3600.0;
   int jump_confirmations = 3;
+};
 
-  // ---- decision: chi2 (docs/method.md) -------------------------------------------------
+/// Set by the host (the loop_fusion adapter, rover_verifier_node, rover_replay flags), never
+/// from a verifier YAML.
+struct HostPolicy {
+  /// Policy for candidates between sequences that nothing connects yet (no prior to test
+  /// against). true = accept as upstream loop_fusion does when merging maps.
+  bool accept_without_prior = true;
+  /// true: keyframe poses arrive in the raw VIO frame of their sequence (the standalone node
+  /// fed from /vins_estimator/keyframe_pose) and the verifier applies the sequence anchoring
+  /// shift itself. false: the caller already did (patched loop_fusion hands poses after its
+  /// w_r_vio / w_t_vio shift).
+  bool anchor_incoming_keyframes = false;
+  /// Candidates between sequences nothing connects yet (relocalisation, map merging): hold and
+  /// release them once confirmed (takes precedence over accept_without_prior).
+  bool confirm_without_prior = false;
+};
+
+/// The odometry drift model and the loops' noise (decisions chi2 and revisit; docs/method.md).
+struct DriftConfig {
   /// Odometry drift model (core/drift.h): standard deviation per square root of a metre
   /// travelled, horizontal and vertical translation [m/sqrt(m)] and yaw [rad/sqrt(m)]; every
   /// keyframe step counts as at least drift_min_step [m] (rotations in place drift too).
@@ -291,6 +307,14 @@ struct VerifierConfig {
   /// Standard deviation of a loop's relative pose (what PnP on the place returns) [m], [rad].
   double loop_sigma = 0.05;
   double loop_sigma_yaw = 1.0 * M_PI / 180.0;
+  /// Scale the drift model's variances to the innovations of the loops accepted so far (a
+  /// robust maximum-likelihood fit, clamped to [1/100, 100]): the user need not know the VIO's
+  /// drift rate exactly.
+  bool calibrate_drift = false;
+};
+
+/// Decision chi2: the gate, the look-alike test, the condensed graph's anchors, holding a weak prior.
+struct Chi2Config {
   /// The gate: reject iff the innovation's Mahalanobis distance d2 (4 dof) exceeds the
   /// chi-square quantile of this probability.
   double gate_probability = 0.999;
@@ -302,12 +326,17 @@ struct VerifierConfig {
   double lookalike_distance = 1.5;
   double lookalike_distance_vertical = 1.5;
   double lookalike_margin = 4.0;
-  /// Revocation: the rivals must fit the graph without the loops they contradict better than
-  /// those loops fit it, by this much (difference of median squared Mahalanobis distances).
-  double revoke_margin = 4.0;
   /// Accepted loops at most in the condensed graph (O(anchors) per verification): loops of one
   /// revisit are merged, then older ones thinned.
   int max_loop_anchors = 64;
+  /// chi2: hold a candidate that passes the tests while the relative position's largest
+  /// standard deviation exceeds hold_sigma [m] (the prior alone is too weak to trust a single
+  /// candidate); 0 = never hold.
+  double hold_sigma = 0.0;
+};
+
+/// Holding and confirming groups, and revocation (every decision).
+struct HoldConfig {
   /// Holding and confirming (both decisions; Verifier::takeDecisions): a held candidate is
   /// released once confirm_count held candidates of the same stretch (queries within
   /// confirm_stretch keyframes, same segments) agree with each other (every pair: the cycle
@@ -324,25 +353,18 @@ struct VerifierConfig {
   /// rival instead. Once revoke_group rivals of one stretch agree with each other and outnumber
   /// the accepted loops of the stretch they contradict, those loops leave the graph; if the
   /// rivals then fit it (median squared Mahalanobis distance of the innovations within the
-  /// gate) decisively better than the loops (lower by lookalike_margin) and at least
-  /// revoke_group of them pass the
-  /// decision, the loops are revoked and the passing rivals released; otherwise everything is
-  /// put back and the rivals dropped. Rivals not confirmed within confirm_window keyframes are
-  /// dropped.
+  /// gate) decisively better than the loops (lower by revoke_margin) and at least revoke_group
+  /// of them pass the decision, the loops are revoked and the passing rivals released;
+  /// otherwise everything is put back and the rivals dropped. Rivals not confirmed within
+  /// confirm_window keyframes are dropped.
   int revoke_group = 0;
-  /// chi2: hold a candidate that passes the tests while the relative position's largest
-  /// standard deviation exceeds hold_sigma [m] (the prior alone is too weak to trust a single
-  /// candidate); 0 = never hold.
-  double hold_sigma = 0.0;
-  /// Candidates between sequences nothing connects yet (relocalisation, map merging): hold and
-  /// release them once confirmed (takes precedence over accept_without_prior). Set by the host.
-  bool confirm_without_prior = false;
-  /// Scale the drift model's variances to the innovations of the loops accepted so far (a
-  /// robust maximum-likelihood fit, clamped to [1/100, 100]): the user need not know the VIO's
-  /// drift rate exactly.
-  bool calibrate_drift = false;
+  /// Revocation: the rivals must fit the graph without the loops they contradict better than
+  /// those loops fit it, by this much (difference of median squared Mahalanobis distances).
+  double revoke_margin = 4.0;
+};
 
-  // ---- decision: revisit (docs/method.md) ------------------------------------------------
+/// Decision revisit: hypotheses of a revisit, their release and competition (docs/method.md).
+struct RevisitConfig {
   /// Members a revisit hypothesis needs before it can be released.
   int revisit_support = 3;
   /// A hypothesis not released within this many keyframes after its first member arrived is
@@ -370,6 +392,25 @@ struct VerifierConfig {
   /// revisit_margin.
   double revisit_member_weight = 1.0;
   double revisit_margin = 4.0;
+};
+
+/// The verifier's parameters, nested by concern. Every field is named by its key (YAML, ROS
+/// parameter, rover_replay flag); core/parameters.h is the one source of each key's text.
+struct VerifierConfig {
+  /// How candidates are decided: kMetric (`metric`: threshold and innovation gate in metres),
+  /// kChi2 (`drift`, `chi2`: in units of drift) or kRevisit (the metric test as the fast path,
+  /// `revisit` for what it rejects). See Decision.
+  Decision decision = Decision::kRevisit;
+  Mode mode = Mode::kFourDof;
+  Alignment alignment = Alignment::kSE3;
+  MetricConfig metric;
+  TrialConfig trial;
+  InputLimits input;
+  HostPolicy host;
+  DriftConfig drift;
+  Chi2Config chi2;
+  HoldConfig hold;
+  RevisitConfig revisit;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.

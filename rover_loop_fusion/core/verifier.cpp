@@ -60,7 +60,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
   Verdict measured;  // the numbers gathered on the way to the decision
-  measured.threshold = config_.threshold;
+  measured.threshold = config_.metric.threshold;
   auto reject = [&](Reason reason, std::string detail) {
     return withNumbers(Verdict::Reject(reason, c, std::move(detail)), measured, t0);
   };
@@ -85,14 +85,14 @@ Verdict Verifier::verify(const LoopCandidate& c) {
            "no trajectory prior; ";
     else
       s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; ";
-    if (config_.confirm_without_prior) {
-      s << "held until " << config_.confirm_count << " candidates between them agree (confirm_without_prior)";
+    if (config_.host.confirm_without_prior) {
+      s << "held until " << config_.hold.confirm_count << " candidates between them agree (confirm_without_prior)";
       hold(c, qpos, mpos, HoldKind::kNoPrior);
       return withNumbers(Verdict::Defer(c, s.str()), measured, t0);
     }
-    s << (config_.accept_without_prior ? "accepted by policy (accept_without_prior)"
+    s << (config_.host.accept_without_prior ? "accepted by policy (accept_without_prior)"
                                        : "rejected by policy (accept_without_prior=false)");
-    if (config_.accept_without_prior)
+    if (config_.host.accept_without_prior)
       return withNumbers(Verdict::Accept(c, s.str(), Reason::kNoTrajectoryPrior), measured, t0);
     return reject(Reason::kNoTrajectoryPrior, s.str());
   }
@@ -166,7 +166,7 @@ Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
     // its verdict: bounded like a verification. Other loops committed without their accepting
     // verify() (rover_replay's oracle protocol, overrides) are solved to convergence, so that
     // what they build does not depend on the machine's load.
-    updated = rule_->updateEstimate(mpos, qpos, prior ? 0.0 : config_.time_budget_ms);
+    updated = rule_->updateEstimate(mpos, qpos, prior ? 0.0 : config_.trial.time_budget_ms);
   }
   // The loop is in the graph (the host uses it) whatever happened to X.
   if (!updated.ok) return Status::Warning("loop committed but the update of the estimate failed (" + updated.message + ")");
@@ -244,7 +244,7 @@ bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
   size_t contradicting = 0;
   LoopCandidate example;
   for (const HeldCandidate& h : group) {
-    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit_stretch));
+    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit.revisit_stretch));
     if (!against.empty()) {
       ++contradicting;
       example = against.front();
@@ -299,7 +299,7 @@ void Verifier::release(const HeldGroup& group) {
   // One update of the estimate for the whole group; in the host's loop-closure path like a
   // commit: bounded when the group had no prior.
   rule_->updateEstimate(revisit ? first_match : committed.front()->match_pos, committed.back()->query_pos,
-                        committed.front()->kind == HoldKind::kNoPrior ? config_.time_budget_ms : 0.0);
+                        committed.front()->kind == HoldKind::kNoPrior ? config_.trial.time_budget_ms : 0.0);
 }
 
 size_t Verifier::keyframeCount() const {

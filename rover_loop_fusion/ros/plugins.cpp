@@ -52,9 +52,9 @@ class TrajectoryPriorVerifier : public LoopVerifier {
                   "loop_fusion, which shifts sessions itself, true in rover_verifier_node; accept_without_prior, "
                   "confirm_without_prior: from the host's ~relocalisation). Remove it from the YAML.",
                   privateNodeHandle().resolveName(key).c_str());
-    load.config.anchor_incoming_keyframes = !host().shifts_sequences;
-    load.config.accept_without_prior = host().relocalisation == Relocalisation::kAcceptUnverified;
-    load.config.confirm_without_prior = host().relocalisation == Relocalisation::kConfirm;
+    load.config.host.anchor_incoming_keyframes = !host().shifts_sequences;
+    load.config.host.accept_without_prior = host().relocalisation == Relocalisation::kAcceptUnverified;
+    load.config.host.confirm_without_prior = host().relocalisation == Relocalisation::kConfirm;
     verifier_.reset(new core::Verifier(load.config));
     ROS_INFO("[rover] %s: trajectory-prior verifier, decision parameters: %s", privateNodeHandle().getNamespace().c_str(),
              core::describe(verifier_->config()).c_str());

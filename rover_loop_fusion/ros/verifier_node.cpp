@@ -127,7 +127,7 @@ bool VerifierNode::start(std::string* error) {
 
   core::VerifierConfig g;  // loop_fusion's graph: its fixed odometry neighbours and Huber loss
   g.mode = p.use_imu ? core::Mode::kFourDof : core::Mode::kSixDof;
-  g.anchor_incoming_keyframes = true;
+  g.host.anchor_incoming_keyframes = true;
   // One keyframe policy: the graph takes the keyframes the verifier takes. Both run the core's
   // intake with the plausibility limits of the verifier's namespace (the table's defaults where
   // it sets none), so a stamp or pose fault refuses the same keyframes in both (the node's graph
@@ -135,9 +135,9 @@ bool VerifierNode::start(std::string* error) {
   // invalid). A plugin with other rules (accept_all keeps every keyframe) leaves the node's.
   {
     const ConfigLoad limits = loadVerifierConfig(ros::NodeHandle(pnh_, host_.params().verifier_name), p.use_imu);
-    g.max_keyframe_jump = limits.config.max_keyframe_jump;
-    g.max_stamp_jump = limits.config.max_stamp_jump;
-    g.jump_confirmations = limits.config.jump_confirmations;
+    g.input.max_keyframe_jump = limits.config.input.max_keyframe_jump;
+    g.input.max_stamp_jump = limits.config.input.max_stamp_jump;
+    g.input.jump_confirmations = limits.config.input.jump_confirmations;
   }
   graph_.reset(new core::KeyframeGraph(g));
 

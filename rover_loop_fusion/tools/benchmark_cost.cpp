@@ -303,7 +303,7 @@ int runGraph(const Options& o, const GraphPlan& p) {
       (m.is_true ? t : f) += 1;
       if (vd.accepted) (m.is_true ? t_acc : f_acc) += 1;
       if (vd.reason == core::Reason::kTimeBudgetExceeded) ++tbe;
-      if (cfg.time_budget_ms > 0 && m.ms > cfg.time_budget_ms) ++over;
+      if (cfg.trial.time_budget_ms > 0 && m.ms > cfg.trial.time_budget_ms) ++over;
       if (vd.reason == core::Reason::kInnovationAboveBound) ++gated;
       if (vd.reason == core::Reason::kInvalidInput) ++invalid;
       if (vd.reason == core::Reason::kDeferred) ++deferred;
@@ -331,7 +331,7 @@ int runGraph(const Options& o, const GraphPlan& p) {
       std::fprintf(csv, "%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%.3f,%.3f,%.1f,%d,%.1f,%.1f\n",
                    dofOf(p.mode), n, span, p.lap, window, cand, t, f, n_tested, gated, deferred, invalid, t_acc, f_acc, tbe, over,
                    it_med, it_max, p50, p90, p99, mx, full, full_iterations, full / p50, full / p99,
-                   cfg.time_budget_ms, commits_cut, verifier_rss, peak_rss);
+                   cfg.trial.time_budget_ms, commits_cut, verifier_rss, peak_rss);
   }
   std::fflush(stdout);
   if (csv) std::fclose(csv);

@@ -49,9 +49,9 @@ int main(int argc, char** argv) {
     else if (a == "--laps") opt.laps = std::atoi(next());
     else if (a == "--sigma_t") opt.sigma_t = std::atof(next());
     else if (a == "--sigma_yaw") opt.sigma_yaw = std::atof(next());
-    else if (a == "--threshold") cfg.threshold = std::atof(next());
-    else if (a == "--margin") cfg.window_margin = std::atoi(next());
-    else if (a == "--robust_candidate") cfg.robust_candidate = true;
+    else if (a == "--threshold") cfg.metric.threshold = std::atof(next());
+    else if (a == "--margin") cfg.trial.window_margin = std::atoi(next());
+    else if (a == "--robust_candidate") cfg.trial.robust_candidate = true;
     else if (a == "--seed") opt.seed = static_cast<uint32_t>(std::atoi(next()));
     else if (a == "--quiet") quiet = true;
     else {
@@ -119,7 +119,7 @@ int main(int argc, char** argv) {
   std::printf("  true positives %d, false positives %d, true negatives %d, false negatives %d\n", tp,
               fp, tn, fn);
   std::printf("  precision %s, recall %s (threshold %.2f m)\n", sim::ratioText(tp, tp + fp).c_str(),
-              sim::ratioText(tp, tp + fn).c_str(), cfg.threshold);
+              sim::ratioText(tp, tp + fn).c_str(), cfg.metric.threshold);
   std::printf("  ATE [m]: odometry %.3f | accept-all (loop_fusion) %.3f | verified (loop_fusion) %.3f | verifier estimate %.3f\n",
               sim::ate(odom, truth), sim::ate(lf_all.poses, truth), sim::ate(lf_verified.poses, truth),
               sim::ate(estimates(verifier), truth));

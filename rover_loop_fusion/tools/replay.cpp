@@ -113,8 +113,8 @@ bool count(const std::string& s, int* v) {
 /// The hosts' ~relocalisation policy as the verifier's two flags (ros/plugins.cpp does the same).
 bool applyRelocalisation(const std::string& policy, core::VerifierConfig* c) {
   if (policy != "confirm" && policy != "reject" && policy != "accept_unverified") return false;
-  c->accept_without_prior = policy == "accept_unverified";
-  c->confirm_without_prior = policy == "confirm";
+  c->host.accept_without_prior = policy == "accept_unverified";
+  c->host.confirm_without_prior = policy == "confirm";
   return true;
 }
 
@@ -225,8 +225,8 @@ int main(int argc, char** argv) {
     else return fail("unknown option " + a);
   }
   if (!policy_given) applyRelocalisation(relocalisation, &policy);
-  cfg.accept_without_prior = policy.accept_without_prior;
-  cfg.confirm_without_prior = policy.confirm_without_prior;
+  cfg.host.accept_without_prior = policy.host.accept_without_prior;
+  cfg.host.confirm_without_prior = policy.host.confirm_without_prior;
   if (scenario_dir.empty() || out_dir.empty()) return usage(2);
   if (protocol != "sequential" && protocol != "oracle" && protocol != "none")
     return fail("--protocol must be sequential, oracle or none (got '" + protocol + "')");
@@ -235,7 +235,7 @@ int main(int argc, char** argv) {
   if (!quiet)
     std::printf("rover_replay: %s; relocalisation: %s (accept_without_prior %s, confirm_without_prior %s)\n",
                 core::describe(cfg).c_str(), relocalisation.empty() ? "set by flags" : relocalisation.c_str(),
-                cfg.accept_without_prior ? "true" : "false", cfg.confirm_without_prior ? "true" : "false");
+                cfg.host.accept_without_prior ? "true" : "false", cfg.host.confirm_without_prior ? "true" : "false");
   sim::Scenario s;
   std::string error;
   if (!sim::loadScenario(scenario_dir, &s, &error)) {
@@ -491,7 +491,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::printf("rover_replay: %zu keyframes (%d refused), %zu candidates, protocol %s, threshold %.2f m\n",
-              stamps.size(), refused_keyframes, verified, protocol.c_str(), cfg.threshold);
+              stamps.size(), refused_keyframes, verified, protocol.c_str(), cfg.metric.threshold);
   if (oracle_refused > 0)
     std::printf("rover_replay: %d true candidates not committed by the oracle (the same loop again)\n", oracle_refused);
   if (tp + fp + tn + fn > 0)

@@ -162,16 +162,16 @@ TEST(BadCandidate, DuplicateCommitIsRefused) {
 
 TEST(BadConfig, InvalidValuesFallBackToDefaults) {
   VerifierConfig cfg;
-  cfg.threshold = -1;
-  cfg.max_iterations = 0;
-  cfg.window_margin = -5;
+  cfg.metric.threshold = -1;
+  cfg.trial.max_iterations = 0;
+  cfg.trial.window_margin = -5;
   const Verifier v(cfg);
   EXPECT_NE(v.configError().find("threshold"), std::string::npos);
   EXPECT_NE(v.configError().find("max_iterations"), std::string::npos);
   EXPECT_NE(v.configError().find("window_margin"), std::string::npos);
-  EXPECT_DOUBLE_EQ(v.config().threshold, VerifierConfig().threshold);
+  EXPECT_DOUBLE_EQ(v.config().metric.threshold, VerifierConfig().metric.threshold);
   VerifierConfig nan_cfg;
-  nan_cfg.threshold = kNaN;
+  nan_cfg.metric.threshold = kNaN;
   EXPECT_FALSE(nan_cfg.validate().empty());
   EXPECT_TRUE(VerifierConfig().validate().empty());
 }

@@ -33,13 +33,13 @@ sim::LapsOptions corridorOptions(uint32_t seed) {
 core::VerifierConfig chi2Config(const sim::LapsOptions& o, double drift_factor = 1.0) {
   core::VerifierConfig c;
   c.decision = core::Decision::kChi2;
-  c.drift_xy = drift_factor * o.sigma_t / std::sqrt(o.step);
-  c.drift_z = drift_factor * o.sigma_t / std::sqrt(o.step);
-  c.drift_yaw = drift_factor * o.sigma_yaw / std::sqrt(o.step);
-  c.loop_sigma = 0.05;
-  c.loop_sigma_yaw = 1.0 * M_PI / 180.0;
-  c.lookalike_distance = 1.5;
-  c.lookalike_distance_vertical = 1.5;
+  c.drift.drift_xy = drift_factor * o.sigma_t / std::sqrt(o.step);
+  c.drift.drift_z = drift_factor * o.sigma_t / std::sqrt(o.step);
+  c.drift.drift_yaw = drift_factor * o.sigma_yaw / std::sqrt(o.step);
+  c.drift.loop_sigma = 0.05;
+  c.drift.loop_sigma_yaw = 1.0 * M_PI / 180.0;
+  c.chi2.lookalike_distance = 1.5;
+  c.chi2.lookalike_distance_vertical = 1.5;
   return c;
 }
 
@@ -109,8 +109,8 @@ TEST(Chi2Decision, LookalikeMarginComparesThePlaceWithTheNearestLookalike) {
 
 TEST(Chi2Decision, GateRejectsWhatTheDriftCannotExplain) {
   core::VerifierConfig c;
-  c.lookalike_distance = 0.0;
-  c.lookalike_distance_vertical = 0.0;
+  c.chi2.lookalike_distance = 0.0;
+  c.chi2.lookalike_distance_vertical = 0.0;
   Eigen::Matrix4d S = Eigen::Matrix4d::Identity() * 0.01;
   core::Chi2Numbers n;
   EXPECT_TRUE(core::chi2Test(c, Eigen::Vector4d(0.1, 0.1, 0, 0), S, &n).passed);
@@ -198,7 +198,7 @@ TEST(Chi2Verifier, WithoutTheLookalikeTestAGateThatTrustsTooMuchDriftLetsLookali
   for (uint32_t seed : {7u, 8u, 9u}) {
     const sim::LapsOptions o = corridorOptions(seed);
     core::VerifierConfig c = chi2Config(o, 5.0);
-    c.lookalike_distance = c.lookalike_distance_vertical = 0.0;
+    c.chi2.lookalike_distance = c.chi2.lookalike_distance_vertical = 0.0;
     Verifier v(c);
     fp += runScene(v, sim::makeLapsScene(o)).fp;
   }
@@ -226,10 +226,10 @@ TEST(Chi2Verifier, CommitPlacesEveryKeyframeAsTheFullWeightedSolve) {
   const std::vector<core::TrajectoryPoint> t = v.trajectory();
   // Reference: every keyframe an anchor, every step its own edge, the match held fixed.
   core::DriftModel dm;
-  dm.sigma_xy = cfg.drift_xy;
-  dm.sigma_z = cfg.drift_z;
-  dm.sigma_yaw = cfg.drift_yaw;
-  dm.min_step = cfg.drift_min_step;
+  dm.sigma_xy = cfg.drift.drift_xy;
+  dm.sigma_z = cfg.drift.drift_z;
+  dm.sigma_yaw = cfg.drift.drift_yaw;
+  dm.min_step = cfg.drift.drift_min_step;
   core::CondensedGraph full;
   const size_t m = static_cast<size_t>(loop->candidate.match_index), q = t.size() - 1;
   std::vector<Eigen::Matrix3d> R;
@@ -258,8 +258,8 @@ TEST(Chi2Verifier, CommitPlacesEveryKeyframeAsTheFullWeightedSolve) {
   l.to = static_cast<int>(q);
   l.t = loop->candidate.relative_t;
   l.yaw = loop->candidate.relative_yaw;
-  l.covariance = Eigen::Matrix4d::Identity() * cfg.loop_sigma * cfg.loop_sigma;
-  l.covariance(3, 3) = cfg.loop_sigma_yaw * cfg.loop_sigma_yaw;
+  l.covariance = Eigen::Matrix4d::Identity() * cfg.drift.loop_sigma * cfg.drift.loop_sigma;
+  l.covariance(3, 3) = cfg.drift.loop_sigma_yaw * cfg.drift.loop_sigma_yaw;
   ASSERT_TRUE(full.addEdge(l));
   bool ok = false;
   full.solve(20, 1e-10, &ok);
@@ -276,8 +276,8 @@ TEST(Chi2Verifier, CommitPlacesEveryKeyframeAsTheFullWeightedSolve) {
 TEST(Chi2Verifier, CalibrationFindsTheDriftTheUserUnderstated) {
   const sim::LapsOptions o = corridorOptions(8);
   core::VerifierConfig c = chi2Config(o, 0.3);  // rates 3.3x too small: variances 11x
-  c.lookalike_distance = c.lookalike_distance_vertical = 0.0;
-  c.calibrate_drift = true;
+  c.chi2.lookalike_distance = c.chi2.lookalike_distance_vertical = 0.0;
+  c.drift.calibrate_drift = true;
   Verifier v(c);
   runScene(v, sim::makeLapsScene(o));
   EXPECT_GT(v.driftScale(), 3.0);
@@ -322,7 +322,7 @@ void addSessionsUpTo(Verifier& v, const Sessions& s, int64_t last, size_t* next)
 TEST(HeldCandidates, RelocalisationIsHeldUntilConfirmedThenReleasedAndCommitted) {
   const Sessions s = twoSessions(7);
   core::VerifierConfig c = chi2Config(corridorOptions(7));
-  c.confirm_without_prior = true;
+  c.host.confirm_without_prior = true;
   Verifier v(c);
   size_t next = 0;
   int deferred = 0, released = 0, accepted_after = 0, false_accepted = 0;
@@ -344,8 +344,8 @@ TEST(HeldCandidates, RelocalisationIsHeldUntilConfirmedThenReleasedAndCommitted)
       ++released;
     }
   }
-  EXPECT_EQ(deferred, c.confirm_count) << "held until confirm_count agree, then the prior decides";
-  EXPECT_EQ(released, c.confirm_count);
+  EXPECT_EQ(deferred, c.hold.confirm_count) << "held until confirm_count agree, then the prior decides";
+  EXPECT_EQ(released, c.hold.confirm_count);
   EXPECT_GT(accepted_after, 10);
   EXPECT_EQ(v.heldCount(), 0u);
   EXPECT_EQ(v.loopCount(), static_cast<size_t>(released + accepted_after)) << "released loops are committed by the verifier";
@@ -355,8 +355,8 @@ TEST(HeldCandidates, RelocalisationIsHeldUntilConfirmedThenReleasedAndCommitted)
 TEST(HeldCandidates, AnUnconfirmedRelocalisationIsDroppedAfterTheWindow) {
   const Sessions s = twoSessions(8);
   core::VerifierConfig c = chi2Config(corridorOptions(8));
-  c.confirm_without_prior = true;
-  c.confirm_window = 20;
+  c.host.confirm_without_prior = true;
+  c.hold.confirm_window = 20;
   Verifier v(c);
   size_t next = 0;
   const sim::SimCandidate* lookalike = nullptr;
@@ -371,7 +371,7 @@ TEST(HeldCandidates, AnUnconfirmedRelocalisationIsDroppedAfterTheWindow) {
   EXPECT_TRUE(v.verify(lookalike->candidate).deferred);
   EXPECT_EQ(v.heldCount(), 1u);
   EXPECT_TRUE(v.takeDecisions().empty());
-  addSessionsUpTo(v, s, lookalike->candidate.query_index + c.confirm_window + 1, &next);
+  addSessionsUpTo(v, s, lookalike->candidate.query_index + c.hold.confirm_window + 1, &next);
   const std::vector<core::LoopDecision> d = v.takeDecisions();
   ASSERT_EQ(d.size(), 1u);
   EXPECT_EQ(d[0].kind, core::LoopDecision::Kind::kDrop);
@@ -387,7 +387,7 @@ TEST(HeldCandidates, AgreeingLookalikesAreNotConfirmedWithTrueLoopsOfTheSameStre
   // keeps them in separate groups; the true one (more members) is released, the rival dropped.
   const Sessions s = twoSessions(9);
   core::VerifierConfig c = chi2Config(corridorOptions(9));
-  c.confirm_without_prior = true;
+  c.host.confirm_without_prior = true;
   Verifier v(c);
   size_t next = 0;
   int true_released = 0, false_released = 0, seen = 0, false_seen = 0;
@@ -409,7 +409,7 @@ TEST(HeldCandidates, AgreeingLookalikesAreNotConfirmedWithTrueLoopsOfTheSameStre
     }
     if (v.loopCount() > 0 && v.heldCount() == 0) break;  // connected: the rest is the gate's
   }
-  EXPECT_GE(true_released, c.confirm_count);
+  EXPECT_GE(true_released, c.hold.confirm_count);
   EXPECT_EQ(false_released, 0);
   EXPECT_GT(false_seen, 0) << "look-alikes were held too (" << seen << " candidates)";
 }
@@ -417,7 +417,7 @@ TEST(HeldCandidates, AgreeingLookalikesAreNotConfirmedWithTrueLoopsOfTheSameStre
 TEST(HeldCandidates, WeakPriorHoldsUntilTheRevisitAgrees) {
   const sim::LapsOptions o = corridorOptions(7);
   core::VerifierConfig c = chi2Config(o);
-  c.hold_sigma = 0.05;  // nearly always too weak: hold and confirm
+  c.chi2.hold_sigma = 0.05;  // nearly always too weak: hold and confirm
   Verifier v(c);
   const sim::Scene s = sim::makeLapsScene(o);
   size_t next = 0;

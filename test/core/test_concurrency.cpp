@@ -20,7 +20,7 @@ TEST(Concurrency, KeyframeThreadWithReadersAndVerifiers) {
   o.laps = 2;
   const sim::Scene s = sim::makeLapsScene(o);
   core::VerifierConfig cfg;
-  cfg.max_iterations = 10;
+  cfg.trial.max_iterations = 10;
   core::Verifier v(cfg);
   std::atomic<bool> done(false);
   std::atomic<int> verdicts(0), bad(0);

@@ -40,9 +40,9 @@ sim::Scene longLaps() {
 
 core::VerifierConfig config(int condense_min_window, int trial_loop_anchors = 256) {
   core::VerifierConfig cfg;
-  cfg.time_budget_ms = 0;  // nothing depends on the machine's load
-  cfg.condense_min_window = condense_min_window;
-  cfg.trial_loop_anchors = trial_loop_anchors;
+  cfg.trial.time_budget_ms = 0;  // nothing depends on the machine's load
+  cfg.trial.condense_min_window = condense_min_window;
+  cfg.trial.trial_loop_anchors = trial_loop_anchors;
   return cfg;
 }
 

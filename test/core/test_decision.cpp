@@ -27,25 +27,25 @@ SolveSummary converged() {
 
 TEST(Decision, ScoreThresholdIsFixedUnlessItGrowsWithThePath) {
   VerifierConfig c;
-  c.threshold = 0.2;
+  c.metric.threshold = 0.2;
   EXPECT_DOUBLE_EQ(scoreThreshold(c, 100.0), 0.2);
-  c.threshold_per_metre = 0.01;
+  c.metric.threshold_per_metre = 0.01;
   EXPECT_DOUBLE_EQ(scoreThreshold(c, 10.0), 0.2 + 0.1);
-  c.max_threshold = 0.25;
+  c.metric.max_threshold = 0.25;
   EXPECT_DOUBLE_EQ(scoreThreshold(c, 10.0), 0.25);
   EXPECT_DOUBLE_EQ(scoreThreshold(c, kInf), 0.2) << "no path: the fixed threshold";
 }
 
 TEST(Decision, InnovationGateBoundGrowsWithThePath) {
   VerifierConfig c;
-  c.max_innovation = 0.5;
-  c.max_innovation_per_metre = 0.02;
+  c.metric.max_innovation = 0.5;
+  c.metric.max_innovation_per_metre = 0.02;
   EXPECT_TRUE(innovationGate(c, 0.69, 10.0).passed);  // bound 0.7 m
   const Check far = innovationGate(c, 0.71, 10.0);
   EXPECT_FALSE(far.passed);
   EXPECT_EQ(far.reason, Reason::kInnovationAboveBound);
   EXPECT_NE(far.detail.find("innovation 0.710 m > 0.700 m"), std::string::npos) << far.detail;
-  c.max_innovation = 0.0;
+  c.metric.max_innovation = 0.0;
   EXPECT_TRUE(innovationGate(c, 50.0, 10.0).passed) << "max_innovation 0: no gate";
 }
 
@@ -62,7 +62,7 @@ TEST(Decision, InnovationGateFailsClosedWhenItsInputsAreNotFinite) {
       EXPECT_NE(g.detail.find("not finite"), std::string::npos) << g.detail;
     }
   }
-  c.max_innovation_per_metre = 2.0;  // (beyond the parameter's range: the function must not care)
+  c.metric.max_innovation_per_metre = 2.0;  // (beyond the parameter's range: the function must not care)
   EXPECT_FALSE(innovationGate(c, 0.1, std::numeric_limits<double>::max()).passed) << "the bound overflows";
 }
 

@@ -125,8 +125,8 @@ TEST(ParameterTable, RangesRefuseWhatTheRedTeamFound) {
   EXPECT_FALSE(assignParameter(*findParameter("mode"), ParameterValue::parse("7dof"), &c, &error));
   EXPECT_NE(error.find("must be auto, 4dof or 6dof"), std::string::npos) << error;
   EXPECT_EQ(describe(c), describe(VerifierConfig())) << "refused values change nothing";
-  c.function_tolerance = 0.5;
-  c.odometry_neighbours = 100000000;
+  c.trial.function_tolerance = 0.5;
+  c.trial.odometry_neighbours = 100000000;
   EXPECT_NE(c.validate().find("function_tolerance"), std::string::npos);
   EXPECT_NE(c.validate().find("odometry_neighbours"), std::string::npos);
   // mode: auto follows the host.
@@ -136,7 +136,7 @@ TEST(ParameterTable, RangesRefuseWhatTheRedTeamFound) {
   EXPECT_EQ(c.mode, Mode::kFourDof);
   // Degrees in, radians stored; the largest allowed value passes validate() after the round trip.
   ASSERT_TRUE(assignParameter(*findParameter("max_relative_yaw_deg"), ParameterValue::parse("180"), &c, &error));
-  EXPECT_DOUBLE_EQ(c.max_relative_yaw, M_PI);
+  EXPECT_DOUBLE_EQ(c.input.max_relative_yaw, M_PI);
   EXPECT_EQ(VerifierConfig(c).validate().find("max_relative_yaw"), std::string::npos) << c.validate();
 }
 
@@ -173,7 +173,7 @@ TEST(ParameterFiles, ShippedYamlsSetExactlyTheTableKeys) {
   ASSERT_TRUE(readParameterFile(kSource + "/config/rover_indoor.yaml", &indoor, &error)) << error;
   ASSERT_TRUE(readParameterFile(kSource + "/config/rover_outdoor.yaml", &outdoor, &error)) << error;
   EXPECT_EQ(describe(indoor), describe(VerifierConfig())) << "the indoor file holds the core's defaults";
-  EXPECT_DOUBLE_EQ(outdoor.threshold, 1.0);
+  EXPECT_DOUBLE_EQ(outdoor.metric.threshold, 1.0);
 }
 
 TEST(ParameterFiles, TheDocsNameEveryKey) {
@@ -191,11 +191,11 @@ TEST(ParameterFiles, TheReaderIsStrictAndSaysWhere) {
                                  "robust_candidate: true\nfunction_tolerance: 1.0e-5\nmax_iterations: 20\n",
                                  "p.yaml", &c, &e, &keys))
       << e;
-  EXPECT_DOUBLE_EQ(c.threshold, 0.3);
+  EXPECT_DOUBLE_EQ(c.metric.threshold, 0.3);
   EXPECT_EQ(c.mode, Mode::kSixDof);
-  EXPECT_TRUE(c.robust_candidate);
-  EXPECT_DOUBLE_EQ(c.function_tolerance, 1e-5);
-  EXPECT_EQ(c.max_iterations, 20);
+  EXPECT_TRUE(c.trial.robust_candidate);
+  EXPECT_DOUBLE_EQ(c.trial.function_tolerance, 1e-5);
+  EXPECT_EQ(c.trial.max_iterations, 20);
   EXPECT_EQ(keys.size(), 5u);
   auto refused = [&](const std::string& text, const std::string& words) {
     VerifierConfig d;

@@ -109,7 +109,7 @@ TEST(KeyframeJump, OneHugeFinitePositionCostsOneKeyframeNotTheGate) {
 
 TEST(KeyframeJump, ARelocationStartsANewSegmentAfterConfirmations) {
   core::VerifierConfig cfg;
-  cfg.accept_without_prior = false;
+  cfg.host.accept_without_prior = false;
   Verifier v(cfg);
   fill(v);
   // The VIO relocates 100 m away and carries on from there.
@@ -282,7 +282,7 @@ TEST(KeyframeJump, ABadFirstKeyframeIsOutvotedNotTakenAsTheReference) {
   EXPECT_TRUE(std::isfinite(within.path_length)) << within.detail;
   // A first keyframe with company is not outvoted: the later run is a relocation.
   core::VerifierConfig cfg;
-  cfg.accept_without_prior = false;
+  cfg.host.accept_without_prior = false;
   Verifier w(cfg);
   fill(w, 10);
   EXPECT_FALSE(w.addKeyframe(10, 20.0, 1, Eigen::Vector3d(100.0, 0, 0), kI).ok);

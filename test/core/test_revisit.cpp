@@ -37,7 +37,7 @@ sim::LapsOptions drifting() {
 core::VerifierConfig config(core::Decision decision) {
   core::VerifierConfig c;
   c.decision = decision;
-  c.time_budget_ms = 0;  // verdicts must not depend on the machine's load
+  c.trial.time_budget_ms = 0;  // verdicts must not depend on the machine's load
   return c;
 }
 
@@ -175,9 +175,9 @@ TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
   // it contradicts the accepted loops.
   const sim::Scene s = sim::makeLapsScene(drifting());
   core::VerifierConfig cfg = config(core::Decision::kRevisit);
-  cfg.revisit_reject_probability = 1.0 - 1e-12;
-  cfg.threshold = 0.01;      // no member passes the fast path ...
-  cfg.max_innovation = 0.0;  // ... and none is stopped by the innovation gate: the row is held and judged
+  cfg.revisit.revisit_reject_probability = 1.0 - 1e-12;
+  cfg.metric.threshold = 0.01;      // no member passes the fast path ...
+  cfg.metric.max_innovation = 0.0;  // ... and none is stopped by the innovation gate: the row is held and judged
   Verifier v(cfg);
   std::vector<core::LoopCandidate> trues;
   for (const sim::SimCandidate& c : s.candidates)
@@ -227,7 +227,7 @@ TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
 TEST(RevisitRule, NothingIsReleasedWhileThePriorIsWeakerThanRevisitMaxSigma) {
   const sim::Scene s = sim::makeLapsScene(drifting());
   core::VerifierConfig cfg = config(core::Decision::kRevisit);
-  cfg.revisit_max_sigma = 0.01;
+  cfg.revisit.revisit_max_sigma = 0.01;
   const Outcome r = run(cfg, s);
   EXPECT_EQ(r.released, 0);
   bool said = false;
@@ -239,8 +239,8 @@ TEST(RevisitRule, NothingIsReleasedWhileThePriorIsWeakerThanRevisitMaxSigma) {
 TEST(RevisitRule, AHeldCandidateWithoutItsRevisitIsDroppedAfterRevisitWindow) {
   const sim::Scene s = sim::makeLapsScene(drifting());
   core::VerifierConfig cfg = config(core::Decision::kRevisit);
-  cfg.revisit_support = 100;  // never enough members
-  cfg.revisit_window = 10;
+  cfg.revisit.revisit_support = 100;  // never enough members
+  cfg.revisit.revisit_window = 10;
   Verifier v(cfg);
   const Outcome r = run(cfg, s, {}, &v);
   EXPECT_EQ(r.released, 0);

@@ -115,17 +115,17 @@ bool sameLoop(const core::LoopCandidate& a, const core::LoopCandidate& b) {
 
 core::VerifierConfig metric() {
   core::VerifierConfig c;
-  c.condense_min_window = 0;
-  c.time_budget_ms = 0;
+  c.trial.condense_min_window = 0;
+  c.trial.time_budget_ms = 0;
   return c;
 }
 
 core::VerifierConfig chi2(const sim::LapsOptions& o) {
   core::VerifierConfig c = metric();
   c.decision = core::Decision::kChi2;
-  c.drift_xy = c.drift_z = 2 * o.sigma_t / std::sqrt(o.step);
-  c.drift_yaw = 2 * o.sigma_yaw / std::sqrt(o.step);
-  c.lookalike_distance = c.lookalike_distance_vertical = 0;  // the rows below are the test
+  c.drift.drift_xy = c.drift.drift_z = 2 * o.sigma_t / std::sqrt(o.step);
+  c.drift.drift_yaw = 2 * o.sigma_yaw / std::sqrt(o.step);
+  c.chi2.lookalike_distance = c.chi2.lookalike_distance_vertical = 0;  // the rows below are the test
   return c;
 }
 
@@ -137,14 +137,14 @@ void expectRevokedAndReleased(const core::VerifierConfig& config) {
 
   // Without revocation: the row stays, the true candidates that contradict it are rejected.
   core::VerifierConfig off = config;
-  off.revoke_group = 0;
+  off.hold.revoke_group = 0;
   const Outcome before = run(off, s, st);
   EXPECT_EQ(before.deferred, 0);
   EXPECT_GE(before.rejected, 3) << "the row makes the true loops of its stretch look wrong";
   EXPECT_EQ(count(before, LoopDecision::Kind::kRevoke), 0);
 
   core::VerifierConfig on = config;
-  on.revoke_group = 3;
+  on.hold.revoke_group = 3;
   Verifier v(on);
   const Outcome r = run(on, s, st, &v);
   EXPECT_GE(r.deferred, 3) << "true candidates contradicting the row are held as rivals";
@@ -191,7 +191,7 @@ TEST(Revocation, RivalsThatDoNotOutnumberTheRowRevokeNothingAndAreDropped) {
   const sim::Scene s = sim::makeLapsScene(o);
   const Stretch st = makeStretch(s, 4, 3, 3);
   core::VerifierConfig c = metric();
-  c.revoke_group = 3;
+  c.hold.revoke_group = 3;
   Verifier v(c);
   const Outcome r = run(c, s, st, &v);
   EXPECT_EQ(r.deferred, 3);
@@ -213,7 +213,7 @@ TEST(Revocation, ARivalGroupThatFailsWithoutTheRowPutsEverythingBack) {
   Stretch twin = st;
   for (core::LoopCandidate& c : twin.trues) c.match_index -= 6;
   core::VerifierConfig c = metric();
-  c.revoke_group = 3;
+  c.hold.revoke_group = 3;
   Verifier v(c);
   size_t next = 0;
   for (const core::LoopCandidate& l : twin.lookalikes) {
@@ -257,7 +257,7 @@ TEST(Revocation, ALargerRowOfLookalikesDoesNotRevokeTheTrueLoopsItContradicts) {
   ASSERT_EQ(st.trues.size(), 7u);
   for (const core::VerifierConfig& base : {metric(), chi2(o)}) {
     core::VerifierConfig c = base;
-    c.revoke_group = 3;
+    c.hold.revoke_group = 3;
     Verifier v(c);
     size_t next = 0;
     std::vector<LoopDecision> decisions;
@@ -296,10 +296,10 @@ TEST(Revocation, RivalsOutsideTheDriftModelRevokeNothingEvenWhereTheLoopsFitWors
   Stretch st = makeStretch(s, 2, 6, 12);
   for (core::LoopCandidate& c : st.trues) c.match_index -= 10;  // the second row, 5 m off
   core::VerifierConfig c = metric();
-  c.max_innovation = 0;  // no gate
-  c.threshold = 0.3;
-  c.threshold_per_metre = 0.05;
-  c.revoke_group = 3;
+  c.metric.max_innovation = 0;  // no gate
+  c.metric.threshold = 0.3;
+  c.metric.threshold_per_metre = 0.05;
+  c.hold.revoke_group = 3;
   Verifier v(c);
   const Outcome r = run(c, s, st, &v);
   std::string details;

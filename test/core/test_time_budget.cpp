@@ -39,9 +39,9 @@ core::LoopCandidate loop(const sim::SimKeyframe& query, const sim::SimKeyframe& 
 
 core::VerifierConfig budget(double ms) {
   core::VerifierConfig cfg;
-  cfg.time_budget_ms = ms;
-  cfg.max_innovation = 0.0;  // the gate off: every candidate reaches the trial solve
-  cfg.condense_min_window = 0;  // the full-window (Ceres) trial: what the budget has to bound
+  cfg.trial.time_budget_ms = ms;
+  cfg.metric.max_innovation = 0.0;  // the gate off: every candidate reaches the trial solve
+  cfg.trial.condense_min_window = 0;  // the full-window (Ceres) trial: what the budget has to bound
   return cfg;
 }
 

@@ -64,7 +64,7 @@ TEST(Verifier, TrueLoopScoresUnderThresholdAndLowersAte) {
   EXPECT_TRUE(vd.accepted) << vd.detail;
   EXPECT_EQ(vd.reason, Reason::kAccepted);
   EXPECT_TRUE(vd.converged);
-  EXPECT_LE(vd.score, v.config().threshold);
+  EXPECT_LE(vd.score, v.config().metric.threshold);
   EXPECT_GT(vd.window_size, 50);
   ASSERT_TRUE(v.commit(c.candidate).ok);
   const double ate_after = sim::ate(estimates(v), truthUpTo(s, v.keyframeCount()));
@@ -75,7 +75,7 @@ TEST(Verifier, FalseRepetitiveLoopScoresOverThreshold) {
   // A look-alike place 3 m away, matched with a plausible small relative pose.
   // The deformation score itself (the innovation gate, which would reject these first, off).
   core::VerifierConfig score_only;
-  score_only.max_innovation = 0.0;
+  score_only.metric.max_innovation = 0.0;
   for (uint32_t seed : {7u, 8u, 9u}) {
     const sim::Scene s = corridor(seed);
     const sim::SimCandidate& c = first(s, false);
@@ -86,7 +86,7 @@ TEST(Verifier, FalseRepetitiveLoopScoresOverThreshold) {
     const Verdict vd = v.verify(c.candidate);
     EXPECT_FALSE(vd.accepted) << "seed " << seed << ": " << vd.detail;
     EXPECT_EQ(vd.reason, Reason::kScoreAboveThreshold);
-    EXPECT_GT(vd.score, v.config().threshold);
+    EXPECT_GT(vd.score, v.config().metric.threshold);
   }
 }
 
@@ -98,7 +98,7 @@ TEST(Verifier, FalseFloorLoopInParkingDeckIsRejected) {
   const sim::Scene s = corridor(7, 3.0);
   const sim::SimCandidate& c = first(s, false);
   core::VerifierConfig score_only;
-  score_only.max_innovation = 0.0;
+  score_only.metric.max_innovation = 0.0;
   Verifier v(score_only);
   addUpTo(v, s, c.candidate.query_index);
   const Verdict vd = v.verify(c.candidate);
@@ -136,12 +136,12 @@ TEST(Verifier, ThresholdGrowsWithPathLengthWhenAsked) {
   const sim::Scene s = corridor();
   const sim::SimCandidate& c = first(s, false);
   core::VerifierConfig cfg;
-  cfg.threshold_per_metre = 0.01;
-  cfg.max_threshold = 0.4;
+  cfg.metric.threshold_per_metre = 0.01;
+  cfg.metric.max_threshold = 0.4;
   Verifier v(cfg);
   addUpTo(v, s, c.candidate.query_index);
   const Verdict vd = v.verify(c.candidate);
-  EXPECT_NEAR(vd.threshold, std::min(0.4, cfg.threshold + 0.01 * vd.path_length), 1e-12);
+  EXPECT_NEAR(vd.threshold, std::min(0.4, cfg.metric.threshold + 0.01 * vd.path_length), 1e-12);
   EXPECT_DOUBLE_EQ(vd.threshold, 0.4);  // ~60 m of path: capped
 }
 
@@ -177,7 +177,7 @@ TEST(Verifier, InnovationGateRejectsLookAlikesNextToTiedPlacesWithoutSolving) {
   EXPECT_TRUE(vt.accepted) << vt.detail;
 
   core::VerifierConfig no_gate;
-  no_gate.max_innovation = 0.0;
+  no_gate.metric.max_innovation = 0.0;
   Verifier w(no_gate);
   addUpTo(w, s, t.candidate.query_index);
   ASSERT_TRUE(w.commit(t.candidate).ok);
@@ -189,7 +189,7 @@ TEST(Verifier, VerifyDoesNotChangeTheGraph) {
   const sim::Scene s = corridor();
   const sim::SimCandidate& c = first(s, false);
   core::VerifierConfig score_only;  // so that the trial solve runs
-  score_only.max_innovation = 0.0;
+  score_only.metric.max_innovation = 0.0;
   Verifier v(score_only);
   addUpTo(v, s, c.candidate.query_index);
   const std::vector<core::Pose> before = estimates(v);
@@ -344,8 +344,8 @@ TEST(Verifier, NoTrajectoryPriorBetweenUnconnectedSequences) {
   ASSERT_GT(c.candidate.query_index, split);
   for (bool policy : {true, false}) {
     core::VerifierConfig cfg;
-    cfg.accept_without_prior = policy;
-    cfg.anchor_incoming_keyframes = true;  // raw per-session poses, as the node hands them
+    cfg.host.accept_without_prior = policy;
+    cfg.host.anchor_incoming_keyframes = true;  // raw per-session poses, as the node hands them
     Verifier v(cfg);
     addUpTo(v, s, split - 1, 1);
     // Sequence 2 re-expressed in its own VIO frame: starts at the origin.
@@ -387,7 +387,7 @@ TEST(Verifier, AnchorsIncomingKeyframesWhenAsked) {
   const int64_t split = 100, last = c.candidate.query_index + 20;
   const core::Pose origin = s.keyframes[split].vio;
   core::VerifierConfig raw_cfg;
-  raw_cfg.anchor_incoming_keyframes = true;
+  raw_cfg.host.anchor_incoming_keyframes = true;
   Verifier raw(raw_cfg);
   addUpTo(raw, s, split - 1, 1);
   for (int64_t k = split; k <= last; ++k) {
@@ -412,8 +412,8 @@ TEST(Verifier, SolverLimitsFailClosed) {
   const sim::SimCandidate& c = first(s, false);
   {
     core::VerifierConfig cfg;
-    cfg.max_innovation = 0.0;  // reach the solver with a false candidate
-    cfg.max_iterations = 1;
+    cfg.metric.max_innovation = 0.0;  // reach the solver with a false candidate
+    cfg.trial.max_iterations = 1;
     Verifier v(cfg);
     addUpTo(v, s, c.candidate.query_index);
     const Verdict vd = v.verify(c.candidate);
@@ -423,8 +423,8 @@ TEST(Verifier, SolverLimitsFailClosed) {
   }
   {
     core::VerifierConfig cfg;
-    cfg.max_innovation = 0.0;
-    cfg.time_budget_ms = 1e-6;
+    cfg.metric.max_innovation = 0.0;
+    cfg.trial.time_budget_ms = 1e-6;
     Verifier v(cfg);
     addUpTo(v, s, c.candidate.query_index);
     const Verdict vd = v.verify(c.candidate);

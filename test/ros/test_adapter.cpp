@@ -1723,13 +1723,13 @@ TEST(ConfigFiles, ShippedYamlsLoadWithoutErrorsOrWarnings) {
     const ConfigLoad load = loadVerifierConfig(ros::NodeHandle(f.first), true);
     EXPECT_TRUE(load.ok()) << (load.errors.empty() ? "" : load.errors[0]);
     EXPECT_TRUE(load.warnings.empty()) << (load.warnings.empty() ? "" : load.warnings[0]);
-    EXPECT_DOUBLE_EQ(load.config.threshold, f.second);
+    EXPECT_DOUBLE_EQ(load.config.metric.threshold, f.second);
     const core::VerifierConfig defaults;
     EXPECT_EQ(load.config.mode, core::Mode::kFourDof);
-    EXPECT_EQ(load.config.max_iterations, defaults.max_iterations);
-    EXPECT_DOUBLE_EQ(load.config.time_budget_ms, defaults.time_budget_ms);
-    EXPECT_NEAR(load.config.max_relative_yaw, defaults.max_relative_yaw, 1e-12);
-    EXPECT_EQ(load.config.anchor_incoming_keyframes, false);
+    EXPECT_EQ(load.config.trial.max_iterations, defaults.trial.max_iterations);
+    EXPECT_DOUBLE_EQ(load.config.trial.time_budget_ms, defaults.trial.time_budget_ms);
+    EXPECT_NEAR(load.config.input.max_relative_yaw, defaults.input.max_relative_yaw, 1e-12);
+    EXPECT_EQ(load.config.host.anchor_incoming_keyframes, false);
   }
 }
 
