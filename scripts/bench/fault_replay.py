@@ -26,6 +26,7 @@ roscore on a free port."""
 import argparse
 import csv
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -178,13 +179,13 @@ def run_node(a, run, name, messages, labels, n_cand, env, out_dir, queue_size, d
     fp = sum(1 for v in finals if v.accepted and labels.get((v.query_index, v.match_index)) == 0)
     n_true = sum(1 for lab in labels.values() if lab == 1)
     text = open(os.path.join(out_dir, "node.txt")).read()
-    lost_lines = [l for l in text.splitlines() if "verdict rows were not written" in l or "verdict rows lost" in l]
+    lost = re.findall(r"(\d+) of (\d+) verdict rows were not written", text)
     reasons = {}
     for v in finals:
         reasons[v.reason] = reasons.get(v.reason, 0) + 1
     return dict(run=run, verdicts=len(finals), held=held, messages=n_msgs, candidates=n_cand, tp=tp, fp=fp, n_true=n_true,
                 recall=tp / n_true if n_true else float("nan"), wall=wall, rows=rows, whole=whole, header=header,
-                lost=lost_lines[-1].split("]: ", 1)[-1] if lost_lines else "none reported",
+                lost=f"{lost[-1][0]} of {lost[-1][1]}" if lost else "none reported",
                 reasons=reasons, raised="raised to" in text and "queue_size" in text)
 
 
