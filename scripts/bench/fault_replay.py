@@ -50,10 +50,10 @@ def make_runs(a):
     fifth = n // 5
     clean = faults.inject_all(s, "clean", [])
     faulty = faults.inject_all(s, "faulty", [
-        faults._late(fifth, 1000.0),
-        faults._frozen_stretch(2 * fifth, 50),
-        faults._deleted(3 * fifth),
-        faults._burst(4 * fifth, 300),
+        faults.late(fifth, 1000.0),
+        faults.frozen_stretch(2 * fifth, 50),
+        faults.deleted(3 * fifth),
+        faults.burst(4 * fifth, 300),
     ])
     what = (f"keyframe {fifth} stamped 1000 s late; keyframes {2 * fifth}..{2 * fifth + 49} with one stamp; "
             f"keyframe {3 * fifth} never sent; keyframes {4 * fifth}..{4 * fifth + 299} and their candidates at once")

@@ -50,7 +50,7 @@ class Faulted:
     yaws: list                # relative yaw of each candidate (from the clean match pose)
 
 
-def _late(k, dt):
+def late(k, dt):
     def f(msgs):
         for m in msgs:
             if m.index == k:
@@ -59,7 +59,7 @@ def _late(k, dt):
     return f
 
 
-def _stamp_of(k, stamp_fn):
+def stamp_of(k, stamp_fn):
     def f(msgs):
         st = {m.index: m.stamp for m in msgs}
         for m in msgs:
@@ -69,17 +69,7 @@ def _stamp_of(k, stamp_fn):
     return f
 
 
-def _frozen(k):
-    def f(msgs):
-        frozen = next(m.stamp for m in msgs if m.index == k)
-        for m in msgs:
-            if m.index >= k:
-                m.stamp = frozen
-        return msgs
-    return f
-
-
-def _position(k, fn):
+def position(k, fn):
     def f(msgs):
         for m in msgs:
             if m.index == k:
@@ -89,7 +79,7 @@ def _position(k, fn):
     return f
 
 
-def _shift_from(k, dx):
+def shift_from(k, dx):
     def f(msgs):
         for m in msgs:
             if m.index >= k:
@@ -99,7 +89,7 @@ def _shift_from(k, dx):
     return f
 
 
-def _frozen_stretch(k, n):
+def frozen_stretch(k, n):
     """Stamps of keyframes k .. k+n-1 equal to k's (a clock that stalls, then recovers)."""
     def f(msgs):
         frozen = next(m.stamp for m in msgs if m.index == k)
@@ -110,7 +100,7 @@ def _frozen_stretch(k, n):
     return f
 
 
-def _burst(k, n):
+def burst(k, n):
     """Keyframes k .. k+n-1 (and their candidates) arrive at once, at keyframe k's time."""
     def f(msgs):
         at = next(m.arrival for m in msgs if m.index == k)
@@ -121,13 +111,13 @@ def _burst(k, n):
     return f
 
 
-def _deleted(k):
+def deleted(k):
     def f(msgs):
         return [m for m in msgs if m.index != k]
     return f
 
 
-def _repeated(k):
+def repeated(k):
     def f(msgs):
         out = []
         for m in msgs:
@@ -140,7 +130,7 @@ def _repeated(k):
     return f
 
 
-def _quaternion(k, scale):
+def quaternion(k, scale):
     def f(msgs):
         for m in msgs:
             if m.index == k:
@@ -151,20 +141,20 @@ def _quaternion(k, scale):
 
 # name -> (what, the catalogue row, the fault as a function of the list of messages)
 FAULTS = {
-    "late_stamp": ("keyframe 100 stamped 1000 s late", "69", _late(100, 1000.0)),
-    "late_stamp_beyond_bound": ("keyframe 100 stamped 5e5 s late (beyond max_stamp_jump)", "69", _late(100, 5e5)),
-    "future_stamp": ("keyframe 100 stamped 4e9 s", "36", _stamp_of(100, lambda st: 4e9)),
+    "late_stamp": ("keyframe 100 stamped 1000 s late", "69", late(100, 1000.0)),
+    "late_stamp_beyond_bound": ("keyframe 100 stamped 5e5 s late (beyond max_stamp_jump)", "69", late(100, 5e5)),
+    "future_stamp": ("keyframe 100 stamped 4e9 s", "36", stamp_of(100, lambda st: 4e9)),
     "out_of_order_stamp": ("keyframe 100 stamped between keyframes 97 and 98", "6",
-                           _stamp_of(100, lambda st: 0.5 * (st[97] + st[98]))),
-    "frozen_stretch": ("every stamp from keyframe 200 on equal (a stalled clock)", "70", _frozen(200)),
-    "repeated_keyframe": ("keyframe 100's message sent twice", "29", _repeated(100)),
-    "bad_first_keyframe": ("keyframe 0 at x = 5e7 m", "71", _position(0, lambda x: 5e7)),
-    "deleted_first_keyframe": ("keyframe 0 never sent", "71", _deleted(0)),
-    "huge_position": ("keyframe 100 at x + 1e30 m", "34", _position(100, lambda x: x + 1e30)),
-    "position_jump": ("keyframe 100 200 m off", "34", _position(100, lambda x: x + 200.0)),
-    "nan_pose": ("keyframe 100 with a NaN position", "1", _position(100, lambda x: math.nan)),
-    "non_unit_quaternion": ("keyframe 100 with |q| = 2", "2", _quaternion(100, 2.0)),
-    "relocation": ("every keyframe from 200 on 100 m away (the VIO relocated)", "35", _shift_from(200, 100.0)),
+                           stamp_of(100, lambda st: 0.5 * (st[97] + st[98]))),
+    "frozen_stretch": ("every stamp from keyframe 200 on equal (a stalled clock)", "70", frozen_stretch(200, 10**9)),
+    "repeated_keyframe": ("keyframe 100's message sent twice", "29", repeated(100)),
+    "bad_first_keyframe": ("keyframe 0 at x = 5e7 m", "71", position(0, lambda x: 5e7)),
+    "deleted_first_keyframe": ("keyframe 0 never sent", "71", deleted(0)),
+    "huge_position": ("keyframe 100 at x + 1e30 m", "34", position(100, lambda x: x + 1e30)),
+    "position_jump": ("keyframe 100 200 m off", "34", position(100, lambda x: x + 200.0)),
+    "nan_pose": ("keyframe 100 with a NaN position", "1", position(100, lambda x: math.nan)),
+    "non_unit_quaternion": ("keyframe 100 with |q| = 2", "2", quaternion(100, 2.0)),
+    "relocation": ("every keyframe from 200 on 100 m away (the VIO relocated)", "35", shift_from(200, 100.0)),
 }
 
 
@@ -174,8 +164,9 @@ def inject(s, name, by_number=False):
 
 
 def inject_all(s, name, fault_list, by_number=False):
-    """The scenario s with every fault of fault_list (functions of the list of messages, as in
-    FAULTS, or _frozen_stretch, _burst), applied in order; `name` names the faulty run."""
+    """The scenario s with every fault of fault_list (functions of the list of messages: the
+    makers above, late(), frozen_stretch(), burst(), ...), applied in order; `name` names the
+    faulty run."""
     from . import scenario as rscenario
     msgs = [KeyframeMessage(k.index, k.stamp, k.T, k.stamp) for k in s.keyframes]
     for fault in fault_list:
