@@ -50,13 +50,22 @@ class Faulted:
     yaws: list                # relative yaw of each candidate (from the clean match pose)
 
 
-def late(k, dt):
+def _each(first, last, edit):
+    """A fault that applies edit(message, first message of keyframe `first`) to the messages
+    of keyframes first .. last-1 (clean indices)."""
     def f(msgs):
+        ref = next((m for m in msgs if m.index == first), None)
         for m in msgs:
-            if m.index == k:
-                m.stamp += dt
+            if first <= m.index < last:
+                edit(m, ref)
         return msgs
     return f
+
+
+def late(k, dt):
+    def edit(m, _):
+        m.stamp += dt
+    return _each(k, k + 1, edit)
 
 
 def stamp_of(k, stamp_fn):
@@ -70,45 +79,31 @@ def stamp_of(k, stamp_fn):
 
 
 def position(k, fn):
-    def f(msgs):
-        for m in msgs:
-            if m.index == k:
-                m.T = m.T.copy()
-                m.T[0, 3] = fn(m.T[0, 3])
-        return msgs
-    return f
+    def edit(m, _):
+        m.T = m.T.copy()
+        m.T[0, 3] = fn(m.T[0, 3])
+    return _each(k, k + 1, edit)
 
 
 def shift_from(k, dx):
-    def f(msgs):
-        for m in msgs:
-            if m.index >= k:
-                m.T = m.T.copy()
-                m.T[0, 3] += dx
-        return msgs
-    return f
+    def edit(m, _):
+        m.T = m.T.copy()
+        m.T[0, 3] += dx
+    return _each(k, float("inf"), edit)
 
 
 def frozen_stretch(k, n):
     """Stamps of keyframes k .. k+n-1 equal to k's (a clock that stalls, then recovers)."""
-    def f(msgs):
-        frozen = next(m.stamp for m in msgs if m.index == k)
-        for m in msgs:
-            if k <= m.index < k + n:
-                m.stamp = frozen
-        return msgs
-    return f
+    def edit(m, ref):
+        m.stamp = ref.stamp
+    return _each(k, k + n, edit)
 
 
 def burst(k, n):
     """Keyframes k .. k+n-1 (and their candidates) arrive at once, at keyframe k's time."""
-    def f(msgs):
-        at = next(m.arrival for m in msgs if m.index == k)
-        for m in msgs:
-            if k <= m.index < k + n:
-                m.arrival = at
-        return msgs
-    return f
+    def edit(m, ref):
+        m.arrival = ref.arrival
+    return _each(k, k + n, edit)
 
 
 def deleted(k):
@@ -131,12 +126,9 @@ def repeated(k):
 
 
 def quaternion(k, scale):
-    def f(msgs):
-        for m in msgs:
-            if m.index == k:
-                m.quaternion_scale = scale
-        return msgs
-    return f
+    def edit(m, _):
+        m.quaternion_scale = scale
+    return _each(k, k + 1, edit)
 
 
 # name -> (what, the catalogue row, the fault as a function of the list of messages)
