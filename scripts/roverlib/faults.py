@@ -21,7 +21,6 @@ import copy
 import math
 import os
 from dataclasses import dataclass
-from typing import List
 
 import numpy as np
 
@@ -43,9 +42,6 @@ class Faulted:
     name: str
     scenario: object          # roverlib.scenario.Scenario for rover_replay
     messages: list            # (bag time, topic, message) for the node
-    by_number: bool
-    # the clean keyframe index of each arrival number
-    arrivals: List[int]
     keyframe_rows: list       # keyframes.csv rows as sent
     yaws: list                # relative yaw of each candidate (from the clean match pose)
 
@@ -163,7 +159,6 @@ def inject_all(s, name, fault_list, by_number=False):
     msgs = [KeyframeMessage(k.index, k.stamp, k.T, k.stamp) for k in s.keyframes]
     for fault in fault_list:
         msgs = fault(msgs)
-    arrivals = [m.index for m in msgs]
     number = {}  # clean index -> arrival number (the first message of it)
     for n, m in enumerate(msgs):
         number.setdefault(m.index, n)
@@ -215,7 +210,7 @@ def inject_all(s, name, fault_list, by_number=False):
                          rbag.candidate_msg(q_stamp, m_stamp, c.T_rel, yaw, c.inliers,
                                             qi, mi)))
     messages.sort(key=lambda e: e[0])
-    return Faulted(name, out, messages, by_number, arrivals, rows, yaws)
+    return Faulted(name, out, messages, rows, yaws)
 
 
 def write(f, directory):
