@@ -127,15 +127,15 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
     const Keyframe& ka = kfs[a[i - 1]];
     const Keyframe& kb = kfs[a[i]];
     if (ka.segment != kb.segment || (o.trial && a[i - 1] < o.first)) continue;
-    const SequenceChain& ch = chains.at(ka.segment);
+    SequenceChain& ch = chains.at(ka.segment);
     CondensedEdge e;
     e.from = static_cast<int>(i - 1);
     e.to = static_cast<int>(i);
     const Eigen::Matrix3d Ra = ka.vio.q.toRotationMatrix();
     e.t = Ra.transpose() * (kb.vio.t - ka.vio.t);
     e.yaw = wrapAngle(kb.yaw - ka.yaw);
-    e.covariance = o.trial ? ch.unit.relative(a[i - 1] - ch.start, a[i] - ch.start, Ra)
-                           : o.variance_scale * ch.moments.relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
+    e.covariance = o.trial ? unitOf(ch).relative(a[i - 1] - ch.start, a[i] - ch.start, Ra)
+                           : o.variance_scale * momentsOf(ch).relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
     if (!cg->addEdge(e)) return false;
   }
   const Eigen::Matrix4d L = o.trial ? unitLoopCovariance() : loopCovariance();
@@ -165,11 +165,11 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
     const Correction c = correctionBetween(x[anchor], now, kfs[anchor]);
     for (size_t p = from; p < to; ++p) x[p] = applyCorrection(c, x[p], kfs[p]);
   };
-  for (const auto& kv : chains) {
+  for (auto& kv : chains) {
     const int seg = kv.first;
-    const SequenceChain& ch = kv.second;
+    SequenceChain& ch = kv.second;
     if (componentOf(ch.start) != component) continue;
-    const size_t end = ch.start + ch.moments.size();
+    const size_t end = ch.start + ch.count;
     std::vector<int> in;  // anchor indices in this segment
     for (size_t i = 0; i < anchors.size(); ++i)
       if (kfs[anchors[i]].segment == seg) in.push_back(static_cast<int>(i));
@@ -199,10 +199,11 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
         gap.head<3>() = Rd.transpose() * (Pb - (Pa + Rd * (kfs[pb].vio.t - kfs[pa].vio.t)));
         gap[3] = wrapAngle(nb.yaw - (kfs[pb].yaw + dyaw));
         const size_t la = pa - ch.start, lb = pb - ch.start;
-        const Eigen::Matrix4d Cbb = ch.moments.cross(la, lb, lb);
+        const ChainMoments& moments = momentsOf(ch);
+        const Eigen::Matrix4d Cbb = moments.cross(la, lb, lb);
         const Eigen::Vector4d w = Cbb.ldlt().solve(gap);
         for (size_t p = pa + 1; p < pb; ++p) {
-          const Eigen::Vector4d corr = ch.moments.cross(la, p - ch.start, lb) * w;
+          const Eigen::Vector4d corr = moments.cross(la, p - ch.start, lb) * w;
           const Eigen::Vector3d t = Pa + Rd * (kfs[p].vio.t - kfs[pa].vio.t) + Rd * corr.head<3>();
           KeyframeState& s = x[p];
           for (int k = 0; k < 3; ++k) s.t[k] = t[k];
@@ -283,7 +284,7 @@ std::vector<std::pair<size_t, size_t>> KeyframeGraph::Impl::windowRanges(const T
   std::vector<std::pair<size_t, size_t>> out;
   for (const auto& kv : chains) {
     const SequenceChain& ch = kv.second;
-    const size_t end = ch.start + ch.moments.size();
+    const size_t end = ch.start + ch.count;
     if (end <= s.first || componentOf(ch.start) != s.component) continue;
     if (skip_fixed_map && kfs[ch.start].sequence == 0) continue;
     out.emplace_back(std::max(ch.start, s.first), end);
@@ -326,7 +327,7 @@ std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, c
       out.push_back(s.states[i - 1]);
     } else if (left && right) {
       const size_t pa = a[i - 1], pb = a[i];
-      const SequenceChain& ch = chains.at(kfs[p].segment);
+      SequenceChain& ch = chains.at(kfs[p].segment);
       const size_t la = pa - ch.start, lb = pb - ch.start;
       ChainFit& f = fits[i - 1];
       if (!f.ready) {
@@ -342,10 +343,10 @@ std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, c
         Eigen::Vector4d gap;
         gap.head<3>() = f.M.transpose() * (Pb - (Pa + f.D * (xb - xa)));
         gap[3] = wrapAngle(nb.yaw - x[pb].yaw - f.dyaw);
-        f.w = ch.unit.cross(la, lb, lb).ldlt().solve(gap);
+        f.w = unitOf(ch).cross(la, lb, lb).ldlt().solve(gap);
         f.ready = true;
       }
-      const Eigen::Vector4d corr = ch.unit.cross(la, p - ch.start, lb) * f.w;
+      const Eigen::Vector4d corr = unitOf(ch).cross(la, p - ch.start, lb) * f.w;
       const KeyframeState& na = s.states[i - 1];
       const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xp(x[p].t[0], x[p].t[1], x[p].t[2]);
       const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();

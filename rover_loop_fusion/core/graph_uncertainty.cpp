@@ -13,28 +13,41 @@
 namespace rover_loop_fusion {
 namespace core {
 
-void KeyframeGraph::Impl::appendMoments(size_t pos) {
-  const Keyframe& kf = kfs[pos];
-  auto it = chains.find(kf.segment);
+void KeyframeGraph::Impl::extendChain(size_t pos) {
+  auto it = chains.find(kfs[pos].segment);
   if (it == chains.end()) {
-    it = chains.emplace(kf.segment, SequenceChain()).first;
+    it = chains.emplace(kfs[pos].segment, SequenceChain()).first;
     it->second.start = pos;
   }
-  SequenceChain& ch = it->second;
-  const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
-  const auto given = step_covariance.find(pos);
-  ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(),
-                    given != step_covariance.end() ? given->second : drift.stepCovariance(length));
-  if (condensable()) ch.unit.append(kf.vio.t, kf.vio.q.toRotationMatrix(), unitStepCovariance());
+  ++it->second.count;
+  if (moments_used) momentsOf(it->second);
+  if (unit_used) unitOf(it->second);
+}
+
+const ChainMoments& KeyframeGraph::Impl::momentsOf(SequenceChain& ch) const {
+  moments_used = true;
+  for (size_t pos = ch.start + ch.moments.size(); pos < ch.start + ch.count; ++pos) {
+    const Keyframe& kf = kfs[pos];
+    const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
+    const auto given = step_covariance.find(pos);
+    ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(),
+                      given != step_covariance.end() ? given->second : drift.stepCovariance(length));
+  }
+  return ch.moments;
+}
+
+const ChainMoments& KeyframeGraph::Impl::unitOf(SequenceChain& ch) const {
+  unit_used = true;
+  for (size_t pos = ch.start + ch.unit.size(); pos < ch.start + ch.count; ++pos)
+    ch.unit.append(kfs[pos].vio.t, kfs[pos].vio.q.toRotationMatrix(), unitStepCovariance());
+  return ch.unit;
 }
 
 void KeyframeGraph::Impl::rebuildMoments(int sequence) {
   for (auto& kv : chains) {
     if (kfs[kv.second.start].sequence != sequence) continue;
-    const size_t start = kv.second.start, n = kv.second.moments.size();
     kv.second.moments.clear();
     kv.second.unit.clear();
-    for (size_t p = start; p < start + n; ++p) appendMoments(p);
   }
 }
 
@@ -78,9 +91,9 @@ bool KeyframeGraph::chainCovariance(size_t from, size_t to, double variance_scal
     cov->setZero();
     return true;
   }
-  const Impl::SequenceChain& ch = m.chains.at(m.kfs[from].segment);
+  Impl::SequenceChain& ch = m.chains.at(m.kfs[from].segment);
   // In from's own frame: the same whether rotated by X's yaw correction or not (VIO, like the moments).
-  *cov = variance_scale * ch.moments.relative(from - ch.start, to - ch.start, m.kfs[from].vio.q.toRotationMatrix());
+  *cov = variance_scale * m.momentsOf(ch).relative(from - ch.start, to - ch.start, m.kfs[from].vio.q.toRotationMatrix());
   return true;
 }
 

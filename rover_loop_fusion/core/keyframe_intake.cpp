@@ -149,9 +149,7 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
       // other outvote it (the first pose of a session needs the same evidence as any jump).
       const size_t prev_pos = m.kfs.size() - 1;
       const bool lone_first = relocated && (prev_pos == 0 || m.kfs[prev_pos - 1].sequence != sequence) &&
-                              std::none_of(m.loops.begin(), m.loops.end(), [&](const Impl::Edge& e) {
-                                return e.from == prev_pos || e.to == prev_pos;
-                              });
+                              m.loop_ends.count(prev_pos) == 0;
       if (relocated) kf.segment = m.next_segment--;
       if (lone_first) {
         std::ostringstream why;
@@ -199,17 +197,13 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
       status = status.message.empty() ? Status::Warning(ignored) : Status::Warning(status.message + "; " + ignored);
     }
   }
-  m.appendMoments(pos);
+  m.extendChain(pos);
   const int n = std::max(0, config_.trial.odometry_neighbours);
   for (int j = n; j >= 1; --j) {
     if (pos < static_cast<size_t>(j)) continue;
     const size_t from = pos - j;
     if (m.kfs[from].segment != kf.segment) continue;
-    Impl::Edge e;
-    e.from = from;
-    e.to = pos;
-    m.setOdometryCost(e);
-    m.odometry.push_back(std::move(e));
+    m.odometry.push_back(m.odometryEdge(from, pos));
   }
   return status;
 }

@@ -14,10 +14,12 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <queue>
 #include <sstream>
 #include <string>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -131,12 +133,32 @@ std::shared_ptr<ceres::CostFunction> KeyframeGraph::Impl::edgeCost(const Eigen::
       SixDofEdgeError::create(t_ij, q_ij, kSixDofTranslationSigma, kSixDofRotationSigma, &L));
 }
 
-void KeyframeGraph::Impl::setOdometryCost(Edge& e) const {
-  const Keyframe& a = kfs[e.from];
-  const Keyframe& b = kfs[e.to];
-  const Eigen::Vector3d t_ab = a.vio.q.conjugate() * (b.vio.t - a.vio.t);
-  e.cost = edgeCost(t_ab, wrapAngle(b.yaw - a.yaw), a.vio.q.conjugate() * b.vio.q, a, 1.0,
-                    e.information.get());
+KeyframeGraph::Impl::OdometryEdge KeyframeGraph::Impl::odometryEdge(size_t from, size_t to) const {
+  const Keyframe& a = kfs[from];
+  const Keyframe& b = kfs[to];
+  OdometryEdge e;
+  e.from = from;
+  e.to = to;
+  Eigen::Map<Eigen::Vector3d>(e.t) = a.vio.q.conjugate() * (b.vio.t - a.vio.t);
+  if (fourDof()) {
+    e.r[0] = wrapAngle(b.yaw - a.yaw);
+    e.r[1] = a.pitch;
+    e.r[2] = a.roll;
+    e.r[3] = 0.0;
+  } else {
+    Eigen::Map<Eigen::Vector4d>(e.r) = (a.vio.q.conjugate() * b.vio.q).coeffs();
+  }
+  return e;
+}
+
+std::shared_ptr<ceres::CostFunction> KeyframeGraph::Impl::odometryCost(const OdometryEdge& e) const {
+  const Eigen::Vector3d t(e.t[0], e.t[1], e.t[2]);
+  if (fourDof()) return std::make_shared<FourDofEdgeCost>(t, e.r[0], e.r[1], e.r[2], 1.0);
+  Eigen::Quaterniond q;
+  q.coeffs() = Eigen::Map<const Eigen::Vector4d>(e.r);
+  const Matrix6d L = Matrix6d::Identity();
+  return std::shared_ptr<ceres::CostFunction>(
+      SixDofEdgeError::create(t, q, kSixDofTranslationSigma, kSixDofRotationSigma, &L));
 }
 
 void KeyframeGraph::Impl::setLoopCost(Edge& e) const {
@@ -184,48 +206,75 @@ double KeyframeGraph::Impl::innovation(const LoopCandidate& c, size_t qpos, size
 }
 
 double KeyframeGraph::Impl::pathLength(size_t from, size_t to) const {
-  std::vector<size_t> nodes = {from, to};
-  for (const Edge& e : loops) {
-    nodes.push_back(e.from);
-    nodes.push_back(e.to);
-  }
-  std::sort(nodes.begin(), nodes.end());
-  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
-  const size_t n = nodes.size();
-  auto id = [&](size_t p) {
-    return static_cast<int>(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin());
+  // The nodes are `from`, `to` and the loop ends; a node's chain neighbours are the nearest
+  // nodes before and after it, if of its segment.
+  auto neighbour = [&](size_t p, bool after, size_t* out) {
+    bool found = false;
+    auto consider = [&](size_t n) {
+      if (after ? n <= p : n >= p) return;
+      if (!found || (after ? n < *out : n > *out)) *out = n;
+      found = true;
+    };
+    consider(from);
+    consider(to);
+    if (after) {
+      const auto it = loop_ends.upper_bound(p);
+      if (it != loop_ends.end()) consider(it->first);
+    } else {
+      const auto it = loop_ends.lower_bound(p);
+      if (it != loop_ends.begin()) consider(std::prev(it)->first);
+    }
+    return found && kfs[*out].segment == kfs[p].segment;
   };
-  std::vector<std::vector<std::pair<int, double>>> adj(n);
-  for (size_t i = 1; i < n; ++i) {
-    if (kfs[nodes[i - 1]].segment != kfs[nodes[i]].segment) continue;
-    const double d = arc[nodes[i]] - arc[nodes[i - 1]];
-    adj[i - 1].emplace_back(static_cast<int>(i), d);
-    adj[i].emplace_back(static_cast<int>(i - 1), d);
-  }
-  for (const Edge& e : loops) {
-    adj[id(e.from)].emplace_back(id(e.to), 0.0);
-    adj[id(e.to)].emplace_back(id(e.from), 0.0);
-  }
-  const int src = id(from), dst = id(to);
-  std::vector<double> dist(n, std::numeric_limits<double>::infinity());
-  using Item = std::pair<double, int>;
+  std::unordered_map<size_t, double> dist;
+  auto distance = [&](size_t p) {
+    const auto it = dist.find(p);
+    return it == dist.end() ? std::numeric_limits<double>::infinity() : it->second;
+  };
+  using Item = std::pair<double, size_t>;
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
-  dist[src] = 0.0;
-  queue.emplace(0.0, src);
+  dist[from] = 0.0;
+  queue.emplace(0.0, from);
   while (!queue.empty()) {
     const Item top = queue.top();
     queue.pop();
-    if (top.first > dist[top.second]) continue;
-    if (top.second == dst) break;
-    for (const auto& nb : adj[top.second]) {
-      const double d = top.first + nb.second;
-      if (d < dist[nb.first]) {
-        dist[nb.first] = d;
-        queue.emplace(d, nb.first);
+    if (top.first > distance(top.second)) continue;
+    if (top.second == to) break;
+    auto relax = [&](size_t n, double length) {
+      const double d = top.first + length;
+      if (d < distance(n)) {
+        dist[n] = d;
+        queue.emplace(d, n);
       }
-    }
+    };
+    size_t n = 0;
+    if (neighbour(top.second, false, &n)) relax(n, arc[top.second] - arc[n]);
+    if (neighbour(top.second, true, &n)) relax(n, arc[n] - arc[top.second]);
+    const auto ends = loop_ends.find(top.second);
+    if (ends != loop_ends.end())
+      for (const LoopEnd& e : ends->second) relax(e.other, 0.0);
   }
-  return dist[dst];
+  return distance(to);
+}
+
+void KeyframeGraph::Impl::indexLoop(size_t from, size_t to) {
+  loop_ends[from].push_back({to, true});
+  loop_ends[to].push_back({from, false});
+}
+
+void KeyframeGraph::Impl::unindexLoop(size_t from, size_t to) {
+  auto drop = [&](size_t at, LoopEnd end) {
+    const auto it = loop_ends.find(at);
+    if (it == loop_ends.end()) return;
+    std::vector<LoopEnd>& v = it->second;
+    const auto e = std::find_if(v.begin(), v.end(), [&](const LoopEnd& x) {
+      return x.other == end.other && x.is_from == end.is_from;
+    });
+    if (e != v.end()) v.erase(e);
+    if (v.empty()) loop_ends.erase(it);
+  };
+  drop(from, {to, true});
+  drop(to, {from, false});
 }
 
 void KeyframeGraph::Impl::anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos) {
@@ -282,10 +331,12 @@ Status KeyframeGraph::addLoop(const LoopCandidate& c) {
   size_t qpos = 0, mpos = 0;
   const std::string bad = m.checkLoop(c, &qpos, &mpos);
   if (!bad.empty()) return Status::Error(bad);
-  for (const Impl::Edge& e : m.loops)
-    if (e.from == mpos && e.to == qpos)
-      return Status::Error("loop " + describeIndex(c.query_index) + " -> " + describeIndex(c.match_index) +
-                           " is already in the graph");
+  const auto ends = m.loop_ends.find(mpos);
+  if (ends != m.loop_ends.end() &&
+      std::any_of(ends->second.begin(), ends->second.end(),
+                  [&](const Impl::LoopEnd& e) { return e.is_from && e.other == qpos; }))
+    return Status::Error("loop " + describeIndex(c.query_index) + " -> " + describeIndex(c.match_index) +
+                         " is already in the graph");
   const int qseq = m.kfs[qpos].sequence, mseq = m.kfs[mpos].sequence;
   // loop_fusion: old_kf->sequence != cur_kf->sequence && sequence_loop[cur_kf->sequence] == 0
   if (qseq != mseq && !m.seq_anchored[qseq]) m.anchorSequence(c, qpos, mpos);
@@ -295,6 +346,7 @@ Status KeyframeGraph::addLoop(const LoopCandidate& c) {
   e.loop = c;
   m.setLoopCost(e);
   m.loops.push_back(std::move(e));
+  m.indexLoop(mpos, qpos);
   m.seg_parent[m.root(m.kfs[qpos].segment)] = m.root(m.kfs[mpos].segment);
   ++m.revision;
   return Status::Ok();
@@ -356,6 +408,7 @@ Status KeyframeGraph::removeLoop(int64_t query_index, int64_t match_index) {
   for (auto it = m.loops.begin(); it != m.loops.end(); ++it) {
     if (it->from == mpos && it->to == qpos) {
       m.loops.erase(it);
+      m.unindexLoop(mpos, qpos);
       ++m.revision;
       return Status::Ok();
     }

@@ -72,19 +72,31 @@ struct KeyframeGraph::Impl {
     int run = 0;
     Keyframe keyframe;
   };
-  /// A relative-pose measurement between two keyframes. `information` weights its residual
-  /// (core/cost_functions.h; 4-DoF: the top-left 4 x 4 block, residual order x, y, z, yaw;
-  /// 6-DoF: all of it); null is unit information, loop_fusion's weighting (today every edge's:
-  /// a drift model fills it in).
+  /// A loop edge (an accepted loop, or a trial's candidate) between two keyframes.
+  /// `information` weights its residual (core/cost_functions.h; 4-DoF: the top-left 4 x 4
+  /// block, residual order x, y, z, yaw; 6-DoF: all of it); null is unit information,
+  /// loop_fusion's weighting (today every edge's).
   struct Edge {
     size_t from, to;  // positions; from is the older keyframe
     std::shared_ptr<const Matrix6d> information;
     std::shared_ptr<ceres::CostFunction> cost;
-    LoopCandidate loop;  // loops only
+    LoopCandidate loop;
+  };
+  /// An odometry edge as measured when its newer keyframe arrived, without a Ceres cost (a
+  /// trial builds the costs of the edges in its window, trial_solve.cpp): 72 bytes where an
+  /// Edge with its cost took ~420 per edge, four edges per keyframe. `t`: the newer
+  /// keyframe's position in the older one's frame; `r`: 4-DoF the yaw change and the older
+  /// keyframe's pitch and roll, 6-DoF the relative rotation's coefficients (x, y, z, w).
+  struct OdometryEdge {
+    size_t from, to;
+    double t[3];
+    double r[4];
   };
   /// A trial problem over the window [first, newest] of one component.
   struct Trial {
     explicit Trial() : problem(compat::problemOptionsNotOwning()) {}
+    /// The costs of the window's odometry edges (the problem does not own its costs).
+    std::vector<std::shared_ptr<ceres::CostFunction>> costs;
     ceres::Problem problem;
     size_t first = 0;
     std::vector<size_t> positions;   // window keyframes, increasing
@@ -97,8 +109,17 @@ struct KeyframeGraph::Impl {
   std::vector<Keyframe> kfs;
   std::vector<double> arc;  // VIO distance travelled since the start of the keyframe's segment
   std::vector<KeyframeState> x;
-  std::vector<Edge> odometry;  // appended in increasing `to`
+  std::vector<OdometryEdge> odometry;  // appended in increasing `to`
   std::vector<Edge> loops;
+  /// The loops by endpoint: at each position that ends a loop, the other end of each (and
+  /// whether this end is the loop's `from`), in the order the loops were added. Kept with
+  /// `loops` (addLoop, removeLoop) so that pathLength and the duplicate check need not scan or
+  /// rebuild anything per candidate.
+  struct LoopEnd {
+    size_t other;
+    bool is_from;
+  };
+  std::map<size_t, std::vector<LoopEnd>> loop_ends;
   std::map<int, int> seg_parent;     // union-find over segments
   std::map<int, bool> seq_anchored;  // loop_fusion's sequence_loop
   std::map<int, Correction> seq_shift;  // applied to incoming poses if anchor_incoming_keyframes
@@ -107,16 +128,24 @@ struct KeyframeGraph::Impl {
   std::unique_ptr<compat::ParameterManifold> quaternion_manifold;
   uint64_t revision = 0;
   size_t solves = 0;
-  // Uncertainty (decision chi2): per segment (its keyframes are contiguous positions from
-  // `start`: odometry joins only keyframes of one segment) the prefix moments of the drift
-  // model along its VIO poses.
+  // Uncertainty (decision chi2, the revisit rule's tests, condensed trials): per segment (its
+  // keyframes are contiguous positions from `start`: odometry joins only keyframes of one
+  // segment) the prefix moments of the drift model along its VIO poses, built when first
+  // needed (momentsOf, unitOf): a graph that never needs them (the node's loop_fusion
+  // stand-in, a run without a long trial) does not pay ~0.5 kB per keyframe for them.
   struct SequenceChain {
     size_t start = 0;
-    ChainMoments moments;
+    size_t count = 0;  // keyframes of the segment so far
+    ChainMoments moments;  // its first moments.size() keyframes
     /// The same with loop_fusion's unit weighting (condensed trials; 4-DoF only).
     ChainMoments unit;
   };
-  std::map<int, SequenceChain> chains;
+  /// mutable: the moments are filled in on first use by const readers (one thread at a time,
+  /// as the whole graph).
+  mutable std::map<int, SequenceChain> chains;
+  /// Once a kind of moments has been needed, addKeyframe keeps it up to date (extendChain), so
+  /// that only the first use pays for the keyframes before it.
+  mutable bool moments_used = false, unit_used = false;
   /// Step covariances handed in with keyframes (addKeyframe), by position; the drift model's
   /// for the others.
   std::unordered_map<size_t, Eigen::Matrix4d, std::hash<size_t>, std::equal_to<size_t>,
@@ -177,14 +206,19 @@ struct KeyframeGraph::Impl {
   std::shared_ptr<ceres::CostFunction> edgeCost(const Eigen::Vector3d& t_ij, double yaw_ij,
                                                 const Eigen::Quaterniond& q_ij, const Keyframe& from,
                                                 double yaw_weight, const Matrix6d* information) const;
-  void setOdometryCost(Edge& e) const;
+  OdometryEdge odometryEdge(size_t from, size_t to) const;
+  std::shared_ptr<ceres::CostFunction> odometryCost(const OdometryEdge& e) const;
   void setLoopCost(Edge& e) const;
 
   std::string checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const;
   double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
   /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
-  /// chain distances), so the cost grows with the number of loops, not of keyframes.
+  /// chain distances between neighbouring ones of a segment; loops are of length 0), on the
+  /// standing index `loop_ends`: it stops at `to`, so it visits only the loop ends nearer to
+  /// `from` than `to` is, not every loop end.
   double pathLength(size_t from, size_t to) const;
+  void indexLoop(size_t from, size_t to);
+  void unindexLoop(size_t from, size_t to);
   /// loop_fusion's first-loop-between-sequences shift of the query's sequence.
   void anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos);
 
@@ -201,7 +235,7 @@ struct KeyframeGraph::Impl {
   double* rotBlock(KeyframeState& s) const { return fourDof() ? &s.yaw : s.q; }
   /// State of position p inside the trial, or a constant block holding x[p] if p is outside.
   KeyframeState* stateFor(Trial& tr, size_t p);
-  void addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss);
+  void addEdge(Trial& tr, size_t from, size_t to, ceres::CostFunction* cost, ceres::LossFunction* loss);
   /// Builds the problem over keyframes [first, newest] whose segment is in `component`
   /// (kEverySegment: all; segment roots can be negative). from_vio: initial values from the VIO poses (loop_fusion) instead
   /// of X. The first window keyframe and sequence-0 keyframes are held fixed.
@@ -275,8 +309,14 @@ struct KeyframeGraph::Impl {
   void spread(int component, const std::vector<size_t>& anchors, const CondensedGraph& cg);
 
   // ---- uncertainty (graph_uncertainty.cpp; core/drift.h) -----------------------------------
-  void appendMoments(size_t pos);
-  /// After loop_fusion's shift of a sequence: the moments of its segments from the new poses.
+  /// Counts keyframe `pos` into its segment's chain (the moments follow when needed).
+  void extendChain(size_t pos);
+  /// The chain's drift-model (unit-weight) moments over all its keyframes, appended now for
+  /// the keyframes that arrived since they were last needed.
+  const ChainMoments& momentsOf(SequenceChain& ch) const;
+  const ChainMoments& unitOf(SequenceChain& ch) const;
+  /// After loop_fusion's shift of a sequence: its segments' moments dropped, to be built again
+  /// from the new poses when needed.
   void rebuildMoments(int sequence);
   Eigen::Matrix4d loopCovariance() const;
 };

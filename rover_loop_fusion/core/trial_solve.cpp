@@ -41,10 +41,11 @@ KeyframeState* KeyframeGraph::Impl::stateFor(Trial& tr, size_t p) {
   return s;
 }
 
-void KeyframeGraph::Impl::addEdge(Trial& tr, const Edge& e, ceres::LossFunction* loss) {
-  KeyframeState* a = stateFor(tr, e.from);
-  KeyframeState* b = stateFor(tr, e.to);
-  tr.problem.AddResidualBlock(e.cost.get(), loss, rotBlock(*a), a->t, rotBlock(*b), b->t);
+void KeyframeGraph::Impl::addEdge(Trial& tr, size_t from, size_t to, ceres::CostFunction* cost,
+                                  ceres::LossFunction* loss) {
+  KeyframeState* a = stateFor(tr, from);
+  KeyframeState* b = stateFor(tr, to);
+  tr.problem.AddResidualBlock(cost, loss, rotBlock(*a), a->t, rotBlock(*b), b->t);
 }
 
 void KeyframeGraph::Impl::buildTrial(Trial& tr, size_t first, int component, bool from_vio,
@@ -61,14 +62,16 @@ void KeyframeGraph::Impl::buildTrial(Trial& tr, size_t first, int component, boo
     addBlocks(tr, tr.states[i], i == 0 || kfs[tr.positions[i]].sequence == 0);
   auto inWindow = [&](size_t p) { return p >= first && tr.local[p - first] >= 0; };
   auto firstOdom = std::lower_bound(odometry.begin(), odometry.end(), first,
-                                    [](const Edge& e, size_t f) { return e.to < f; });
+                                    [](const OdometryEdge& e, size_t f) { return e.to < f; });
   for (auto it = firstOdom; it != odometry.end(); ++it) {
-    if (inWindow(it->from) && inWindow(it->to)) addEdge(tr, *it, nullptr);
+    if (!inWindow(it->from) || !inWindow(it->to)) continue;
+    tr.costs.push_back(odometryCost(*it));
+    addEdge(tr, it->from, it->to, tr.costs.back().get(), nullptr);
   }
   for (const Edge& e : loops) {
-    if (inWindow(e.to)) addEdge(tr, e, huber.get());
+    if (inWindow(e.to)) addEdge(tr, e.from, e.to, e.cost.get(), huber.get());
   }
-  for (const Edge& e : extra) addEdge(tr, e, extra_loss);
+  for (const Edge& e : extra) addEdge(tr, e.from, e.to, e.cost.get(), extra_loss);
 }
 
 SolveSummary KeyframeGraph::Impl::solve(Trial& tr, int max_iterations, double time_budget_ms,

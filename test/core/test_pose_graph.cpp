@@ -7,6 +7,13 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
+#include <queue>
+#include <random>
+#include <utility>
+#include <vector>
+
 using namespace rover_loop_fusion;
 
 namespace {
@@ -69,4 +76,97 @@ TEST(KeyframeGraph, AddLoopRefusesWhatCannotBeAnEdge) {
   EXPECT_NE(graph.addLoop(c).message.find("not finite"), std::string::npos);
   EXPECT_EQ(graph.loopCount(), 1u);
   EXPECT_EQ(graph.revision(), 1u);
+}
+
+// The path length (the gate's and the threshold's "metres of odometry between match and
+// query") is the shortest path along the sequences' odometry with every loop as a shortcut of
+// length 0: checked against a plain Dijkstra over every keyframe, on two sequences, as loops
+// come and go.
+TEST(KeyframeGraph, PathLengthIsTheShortestOdometryPathThroughTheLoops) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> step(0.05, 0.5), unit(-1.0, 1.0);
+  core::KeyframeGraph graph;
+  const int n1 = 300, n = 500;  // keyframes 0..299: sequence 1; 300..499: sequence 2
+  std::vector<double> arc(n, 0.0);
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  for (int i = 0; i < n; ++i) {
+    if (i == n1) t = Eigen::Vector3d(50, 0, 0);
+    const Eigen::Vector3d d(unit(rng), unit(rng), 0.1 * unit(rng));
+    const double len = step(rng);
+    if (i != 0 && i != n1) {
+      t += len * d.normalized();
+      arc[i] = arc[i - 1] + len;
+    }
+    ASSERT_TRUE(graph.addKeyframe(i, 0.1 * i, i < n1 ? 1 : 2, t, Eigen::Quaterniond::Identity()).ok) << i;
+  }
+  // A plain Dijkstra over all keyframes: odometry between neighbours of one sequence, loops 0.
+  std::vector<std::pair<int, int>> loops;
+  auto reference = [&](int from, int to) {
+    std::vector<std::vector<std::pair<int, double>>> adj(n);
+    for (int i = 1; i < n; ++i)
+      if (i != n1) {
+        adj[i - 1].push_back({i, arc[i] - arc[i - 1]});
+        adj[i].push_back({i - 1, arc[i] - arc[i - 1]});
+      }
+    for (const auto& l : loops) {
+      adj[l.first].push_back({l.second, 0.0});
+      adj[l.second].push_back({l.first, 0.0});
+    }
+    std::vector<double> dist(n, std::numeric_limits<double>::infinity());
+    std::priority_queue<std::pair<double, int>, std::vector<std::pair<double, int>>, std::greater<std::pair<double, int>>> q;
+    dist[from] = 0;
+    q.push({0.0, from});
+    while (!q.empty()) {
+      const auto top = q.top();
+      q.pop();
+      if (top.first > dist[top.second]) continue;
+      for (const auto& nb : adj[top.second])
+        if (top.first + nb.second < dist[nb.first]) {
+          dist[nb.first] = top.first + nb.second;
+          q.push({dist[nb.first], nb.first});
+        }
+    }
+    return dist[to];
+  };
+  std::uniform_int_distribution<int> any(0, n - 1);
+  auto check = [&](const char* when) {
+    int finite = 0, infinite = 0;
+    for (int k = 0; k < 300; ++k) {
+      const int a = any(rng), b = any(rng);
+      const double want = reference(a, b), got = graph.pathLength(a, b);
+      if (std::isinf(want)) {
+        EXPECT_TRUE(std::isinf(got)) << when << ": " << a << " -> " << b << " has no path, got " << got;
+        ++infinite;
+      } else {
+        EXPECT_NEAR(got, want, 1e-9) << when << ": " << a << " -> " << b;
+        EXPECT_NEAR(graph.pathLength(b, a), got, 1e-9) << when << ": " << b << " -> " << a;
+        ++finite;
+      }
+    }
+    return std::make_pair(finite, infinite);
+  };
+  EXPECT_EQ(check("no loops").second > 0, true) << "the two sequences are apart until a loop joins them";
+  core::LoopCandidate c;
+  c.relative_q = Eigen::Quaterniond::Identity();
+  c.relative_yaw = 0.0;
+  c.relative_t = Eigen::Vector3d(0.1, 0, 0);
+  while (loops.size() < 60) {
+    int a = any(rng), b = any(rng);
+    if (a == b) continue;
+    if (a > b) std::swap(a, b);
+    c.query_index = b;
+    c.match_index = a;
+    if (!graph.addLoop(c).ok) continue;  // the same loop twice
+    loops.push_back({a, b});
+  }
+  const auto joined = check("60 loops");
+  EXPECT_EQ(joined.second, 0) << "the loops join the sequences";
+  EXPECT_GT(joined.first, 0);
+  for (int k = 0; k < 20; ++k) {
+    const auto l = loops[static_cast<size_t>(k) * 2];
+    ASSERT_TRUE(graph.removeLoop(l.second, l.first).ok);
+  }
+  for (int k = 19; k >= 0; --k) loops.erase(loops.begin() + 2 * k);
+  check("40 loops after 20 removed");
+  EXPECT_EQ(graph.pathLength(42, 42), 0.0);
 }
