@@ -35,17 +35,13 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from long_replay import free_port  # noqa: E402
+from long_replay import add_scene_args, corridor_scene, free_port  # noqa: E402
 from roverlib import bag as rbag  # noqa: E402
-from roverlib import bench, faults, scenes  # noqa: E402
+from roverlib import bench, faults  # noqa: E402
 
 
 def make_runs(a):
-    laps = (a.keyframes + 119) // 120
-    s = scenes.make_scene("corridor", a.sigma, seed=a.seed, n_true=a.n_true, n_false=a.n_false, laps=laps)
-    s.keyframes = s.keyframes[:a.keyframes]
-    s.truth = s.truth[:a.keyframes]
-    s.candidates = [c for c in s.candidates if c.query < a.keyframes]
+    s = corridor_scene(a)
     n = len(s.keyframes)
     fifth = n // 5
     clean = faults.inject_all(s, "clean", [])
@@ -191,12 +187,7 @@ def run_node(a, run, name, messages, labels, n_cand, env, out_dir, queue_size, d
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--keyframes", type=int, default=20000)
-    ap.add_argument("--true", dest="n_true", type=int, default=500)
-    ap.add_argument("--false", dest="n_false", type=int, default=500)
-    ap.add_argument("--rate", type=float, default=40.0, help="rosbag play -r (keyframes every 0.5 s of bag time)")
-    ap.add_argument("--sigma", type=float, default=0.03)
-    ap.add_argument("--seed", type=int, default=3)
+    add_scene_args(ap, 40.0, "rosbag play -r (keyframes every 0.5 s of bag time)")
     ap.add_argument("--disk-kb", type=int, default=4096, help="size of the tmpfs holding the faulty run's log")
     ap.add_argument("--out", default=os.path.join(bench.RESULTS, "fault_replay"))
     a = ap.parse_args(argv)

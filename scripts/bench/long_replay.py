@@ -61,14 +61,29 @@ def percentile(values, q):
     return v[min(len(v) - 1, int(q * len(v)))]
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_scene_args(ap, rate, rate_help="rosbag play -r"):
+    """The long corridor scene's options (this benchmark's and fault_replay's)."""
     ap.add_argument("--keyframes", type=int, default=20000)
     ap.add_argument("--true", dest="n_true", type=int, default=500)
     ap.add_argument("--false", dest="n_false", type=int, default=500)
-    ap.add_argument("--rate", type=float, default=200.0, help="rosbag play -r")
+    ap.add_argument("--rate", type=float, default=rate, help=rate_help)
     ap.add_argument("--sigma", type=float, default=0.03, help="odometry noise level")
     ap.add_argument("--seed", type=int, default=3)
+
+
+def corridor_scene(a):
+    """The corridor driven until a.keyframes, with its candidates up to there."""
+    laps = (a.keyframes + 119) // 120
+    s = scenes.make_scene("corridor", a.sigma, seed=a.seed, n_true=a.n_true, n_false=a.n_false, laps=laps)
+    s.keyframes = s.keyframes[:a.keyframes]
+    s.truth = s.truth[:a.keyframes]
+    s.candidates = [c for c in s.candidates if c.query < a.keyframes]
+    return s
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_scene_args(ap, 200.0)
     ap.add_argument("--optimize-period", type=float, default=0.0,
                     help="node's loop_fusion-like optimisation period [s]; 0: only at the end")
     ap.add_argument("--out", default=os.path.join(bench.RESULTS, "long_replay"))
@@ -87,11 +102,7 @@ def main(argv=None):
         os.remove(log)
 
     t0 = time.time()
-    laps = (a.keyframes + 119) // 120
-    s = scenes.make_scene("corridor", a.sigma, seed=a.seed, n_true=a.n_true, n_false=a.n_false, laps=laps)
-    s.keyframes = s.keyframes[:a.keyframes]
-    s.truth = s.truth[:a.keyframes]
-    s.candidates = [c for c in s.candidates if c.query < a.keyframes]
+    s = corridor_scene(a)
     scenario.write(s, scn_dir)
     bag_path = os.path.join(scn_dir, "scenario.bag")
     rbag.write_bag(s, bag_path)
