@@ -153,12 +153,11 @@ KeyframeGraph::Impl::OdometryEdge KeyframeGraph::Impl::odometryEdge(size_t from,
 
 std::shared_ptr<ceres::CostFunction> KeyframeGraph::Impl::odometryCost(const OdometryEdge& e) const {
   const Eigen::Vector3d t(e.t[0], e.t[1], e.t[2]);
+  // 4-DoF: the older keyframe's pitch and roll as stored, not as kfs holds them now.
   if (fourDof()) return std::make_shared<FourDofEdgeCost>(t, e.r[0], e.r[1], e.r[2], 1.0);
   Eigen::Quaterniond q;
   q.coeffs() = Eigen::Map<const Eigen::Vector4d>(e.r);
-  const Matrix6d L = Matrix6d::Identity();
-  return std::shared_ptr<ceres::CostFunction>(
-      SixDofEdgeError::create(t, q, kSixDofTranslationSigma, kSixDofRotationSigma, &L));
+  return edgeCost(t, 0.0, q, kfs[e.from], 1.0, nullptr);  // 6-DoF: the keyframe is not read
 }
 
 void KeyframeGraph::Impl::setLoopCost(Edge& e) const {
