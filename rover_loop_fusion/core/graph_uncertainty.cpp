@@ -84,6 +84,16 @@ bool KeyframeGraph::relativeCovariance(size_t match_pos, size_t query_pos, doubl
 
 Eigen::Matrix4d KeyframeGraph::loopCovariance() const { return impl_->loopCovariance(); }
 
+void KeyframeGraph::keepMoments(bool drift_weighted, bool unit_weight) {
+  Impl& m = *impl_;
+  for (auto& kv : m.chains) {
+    if (drift_weighted) m.momentsOf(kv.second);
+    if (unit_weight) m.unitOf(kv.second);
+  }
+  m.moments_used = m.moments_used || drift_weighted;
+  m.unit_used = m.unit_used || unit_weight;
+}
+
 bool KeyframeGraph::chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* cov) const {
   const Impl& m = *impl_;
   if (from > to || to >= m.kfs.size() || m.kfs[from].segment != m.kfs[to].segment) return false;

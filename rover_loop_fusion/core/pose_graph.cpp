@@ -13,13 +13,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <iterator>
 #include <limits>
-#include <queue>
 #include <sstream>
 #include <string>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -204,61 +201,72 @@ double KeyframeGraph::Impl::innovation(const LoopCandidate& c, size_t qpos, size
   return (m.q.conjugate() * (q.t - m.t) - c.relative_t).norm();
 }
 
+bool KeyframeGraph::Impl::loopEndBefore(size_t pos, size_t* end) const {
+  const auto it = loop_ends.lower_bound(pos);
+  if (it == loop_ends.begin()) return false;
+  *end = std::prev(it)->first;
+  return kfs[*end].segment == kfs[pos].segment;  // a segment's keyframes are contiguous
+}
+
+bool KeyframeGraph::Impl::loopEndAfter(size_t pos, size_t* end) const {
+  const auto it = loop_ends.upper_bound(pos);
+  if (it == loop_ends.end()) return false;
+  *end = it->first;
+  return kfs[*end].segment == kfs[pos].segment;
+}
+
 double KeyframeGraph::Impl::pathLength(size_t from, size_t to) const {
-  // The nodes are `from`, `to` and the loop ends; a node's chain neighbours are the nearest
-  // nodes before and after it, if of its segment.
-  auto neighbour = [&](size_t p, bool after, size_t* out) {
-    bool found = false;
-    auto consider = [&](size_t n) {
-      if (after ? n <= p : n >= p) return;
-      if (!found || (after ? n < *out : n > *out)) *out = n;
-      found = true;
-    };
-    consider(from);
-    consider(to);
-    if (after) {
-      const auto it = loop_ends.upper_bound(p);
-      if (it != loop_ends.end()) consider(it->first);
+  if (from == to) return 0.0;
+  if (places_stale) rebuildPlaces();
+  // Along the segment, if they share one (a stretch of odometry with no loop taken).
+  double best = kfs[from].segment == kfs[to].segment ? std::abs(arc[to] - arc[from])
+                                                     : std::numeric_limits<double>::infinity();
+  // Else (or shorter) through the loops: from one of from's nearest loop ends (itself if it is
+  // one) to one of to's.
+  auto ends = [&](size_t p) {
+    std::vector<std::pair<size_t, double>> out;
+    size_t e = 0;
+    if (loop_ends.count(p)) {
+      out.emplace_back(p, 0.0);
     } else {
-      const auto it = loop_ends.lower_bound(p);
-      if (it != loop_ends.begin()) consider(std::prev(it)->first);
+      if (loopEndBefore(p, &e)) out.emplace_back(e, arc[p] - arc[e]);
+      if (loopEndAfter(p, &e)) out.emplace_back(e, arc[e] - arc[p]);
     }
-    return found && kfs[*out].segment == kfs[p].segment;
+    return out;
   };
-  std::unordered_map<size_t, double> dist;
-  auto distance = [&](size_t p) {
-    const auto it = dist.find(p);
-    return it == dist.end() ? std::numeric_limits<double>::infinity() : it->second;
-  };
-  using Item = std::pair<double, size_t>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
-  dist[from] = 0.0;
-  queue.emplace(0.0, from);
-  while (!queue.empty()) {
-    const Item top = queue.top();
-    queue.pop();
-    if (top.first > distance(top.second)) continue;
-    if (top.second == to) break;
-    auto relax = [&](size_t n, double length) {
-      const double d = top.first + length;
-      if (d < distance(n)) {
-        dist[n] = d;
-        queue.emplace(d, n);
-      }
-    };
-    size_t n = 0;
-    if (neighbour(top.second, false, &n)) relax(n, arc[top.second] - arc[n]);
-    if (neighbour(top.second, true, &n)) relax(n, arc[n] - arc[top.second]);
-    const auto ends = loop_ends.find(top.second);
-    if (ends != loop_ends.end())
-      for (const LoopEnd& e : ends->second) relax(e.other, 0.0);
+  const auto sources = ends(from);
+  if (sources.empty()) return best;
+  return places.shortest(sources, ends(to), best);
+}
+
+void KeyframeGraph::Impl::addPlaceStretches(size_t pos) const {
+  size_t e = 0;
+  if (loopEndBefore(pos, &e)) places.addStretch(e, pos, arc[pos] - arc[e]);
+  if (loopEndAfter(pos, &e)) places.addStretch(pos, e, arc[e] - arc[pos]);
+}
+
+void KeyframeGraph::Impl::rebuildPlaces() const {
+  places.clear();
+  for (auto it = loop_ends.begin(); it != loop_ends.end(); ++it) {
+    if (it != loop_ends.begin()) {
+      const size_t before = std::prev(it)->first;
+      if (kfs[before].segment == kfs[it->first].segment)
+        places.addStretch(before, it->first, arc[it->first] - arc[before]);
+    }
+    for (const LoopEnd& e : it->second)
+      if (e.is_from) places.join(it->first, e.other);
   }
-  return distance(to);
+  places_stale = false;
 }
 
 void KeyframeGraph::Impl::indexLoop(size_t from, size_t to) {
-  loop_ends[from].push_back({to, true});
-  loop_ends[to].push_back({from, false});
+  for (size_t end : {from, to}) {
+    // A new loop end splits the stretch it lies on; the whole stretch stays in `places` (a
+    // real path, never shorter than its two parts).
+    if (!places_stale && loop_ends.count(end) == 0) addPlaceStretches(end);
+    loop_ends[end].push_back(end == from ? LoopEnd{to, true} : LoopEnd{from, false});
+  }
+  if (!places_stale) places.join(from, to);
 }
 
 void KeyframeGraph::Impl::unindexLoop(size_t from, size_t to) {
@@ -274,6 +282,7 @@ void KeyframeGraph::Impl::unindexLoop(size_t from, size_t to) {
   };
   drop(from, {to, true});
   drop(to, {from, false});
+  places_stale = true;  // the loop may have been all that made two ends one place
 }
 
 void KeyframeGraph::Impl::anchorSequence(const LoopCandidate& c, size_t qpos, size_t mpos) {

@@ -184,6 +184,10 @@ class KeyframeGraph {
   bool chainCovariance(size_t from, size_t to, double variance_scale, Eigen::Matrix4d* covariance) const;
   /// Covariance of a loop's relative pose (loop_sigma, loop_sigma_yaw).
   Eigen::Matrix4d loopCovariance() const;
+  /// Keep the prefix moments up to date on keyframe arrival from now on: the drift-weighted
+  /// ones (everything above) and/or the unit-weight ones (condensed trials). Without it each
+  /// kind is built on its first use, which then pays for every keyframe before it at once.
+  void keepMoments(bool drift_weighted, bool unit_weight);
   /// The candidate's relative pose minus what X predicts: translation in the match's frame, yaw.
   Eigen::Vector4d innovationVector(const LoopCandidate& c, size_t query_pos, size_t match_pos) const;
   /// X := the weighted least-squares estimate of the component of `position` with its accepted

@@ -14,6 +14,7 @@
 #include "rover_loop_fusion/core/condensed.h"
 #include "rover_loop_fusion/core/cost_functions.h"
 #include "rover_loop_fusion/core/drift.h"
+#include "rover_loop_fusion/core/place_graph.h"
 #include "rover_loop_fusion/core/trial_budget.h"
 
 #include <cmath>
@@ -120,6 +121,12 @@ struct KeyframeGraph::Impl {
     bool is_from;
   };
   std::map<size_t, std::vector<LoopEnd>> loop_ends;
+  /// The loop ends as places (core/place_graph.h), for pathLength: built from `loop_ends` on
+  /// the first pathLength and on the first after a removal (`places_stale`), kept up to date
+  /// as loops are added in between (a graph that never asks, the node's loop_fusion stand-in,
+  /// never builds it).
+  mutable PlaceGraph places;
+  mutable bool places_stale = true;
   std::map<int, int> seg_parent;     // union-find over segments
   std::map<int, bool> seq_anchored;  // loop_fusion's sequence_loop
   std::map<int, Correction> seq_shift;  // applied to incoming poses if anchor_incoming_keyframes
@@ -130,9 +137,10 @@ struct KeyframeGraph::Impl {
   size_t solves = 0;
   // Uncertainty (decision chi2, the revisit rule's tests, condensed trials): per segment (its
   // keyframes are contiguous positions from `start`: odometry joins only keyframes of one
-  // segment) the prefix moments of the drift model along its VIO poses, built when first
-  // needed (momentsOf, unitOf): a graph that never needs them (the node's loop_fusion
-  // stand-in, a run without a long trial) does not pay ~0.5 kB per keyframe for them.
+  // segment) the prefix moments of the drift model along its VIO poses, kept from the start if
+  // the verifier's configuration will need them (keepMoments), else built when first needed
+  // (momentsOf, unitOf): a graph that never needs them (the node's loop_fusion stand-in, the
+  // metric rule without a long trial) does not pay ~0.5 kB per keyframe for them.
   struct SequenceChain {
     size_t start = 0;
     size_t count = 0;  // keyframes of the segment so far
@@ -212,11 +220,16 @@ struct KeyframeGraph::Impl {
 
   std::string checkLoop(const LoopCandidate& c, size_t* qpos, size_t* mpos) const;
   double innovation(const LoopCandidate& c, size_t qpos, size_t mpos) const;
-  /// Dijkstra over the two ends and the loop endpoints only (arc-length differences give the
-  /// chain distances between neighbouring ones of a segment; loops are of length 0), on the
-  /// standing index `loop_ends`: it stops at `to`, so it visits only the loop ends nearer to
-  /// `from` than `to` is, not every loop end.
+  /// The shortest odometry path between two keyframes, every loop a shortcut of length 0: the
+  /// stretch between them if they share a segment, or a walk over `places` from the loop ends
+  /// next to `from` to those next to `to` (arc-length differences within a segment).
   double pathLength(size_t from, size_t to) const;
+  /// The loop ends before and after `pos` on its segment (false: none), with their distances.
+  bool loopEndBefore(size_t pos, size_t* end) const;
+  bool loopEndAfter(size_t pos, size_t* end) const;
+  /// A new loop end `pos` (not yet in `loop_ends`): its stretches to the loop ends beside it.
+  void addPlaceStretches(size_t pos) const;
+  void rebuildPlaces() const;
   void indexLoop(size_t from, size_t to);
   void unindexLoop(size_t from, size_t to);
   /// loop_fusion's first-loop-between-sequences shift of the query's sequence.

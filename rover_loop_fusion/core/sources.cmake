@@ -5,6 +5,7 @@ set(ROVER_CORE_SOURCES
   alignment.cpp
   drift.cpp
   condensed.cpp
+  place_graph.cpp
   pose_graph.cpp
   keyframe_intake.cpp
   trial_solve.cpp

@@ -44,7 +44,12 @@ Verifier::Verifier(const VerifierConfig& config)
       config_(config_error_.empty() ? config : VerifierConfig()),
       graph_(config_),
       rule_(makeDecisionRule(config_, graph_)),
-      held_(config_) {}
+      held_(config_) {
+  // What this configuration's decisions will need, built keyframe by keyframe (a first held
+  // candidate after 100k keyframes would otherwise build it all at once: ~30-60 ms).
+  graph_.keepMoments(config_.decision != Decision::kMetric,
+                     config_.mode == Mode::kFourDof && config_.trial.condense_min_window > 0);
+}
 
 Verifier::~Verifier() = default;
 

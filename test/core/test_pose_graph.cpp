@@ -1,12 +1,14 @@
 // core::KeyframeGraph on its own: loop_fusion's stand-in graph (rover_verifier_node's ~pose_graph_path,
 // rover_replay's accept-all baseline) collects loops without solving and solves once, like
 // loop_fusion, to the same result as a verifier that committed the same loops.
+#include "rover_loop_fusion/core/place_graph.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <queue>
@@ -150,15 +152,22 @@ TEST(KeyframeGraph, PathLengthIsTheShortestOdometryPathThroughTheLoops) {
   c.relative_q = Eigen::Quaterniond::Identity();
   c.relative_yaw = 0.0;
   c.relative_t = Eigen::Vector3d(0.1, 0, 0);
-  while (loops.size() < 60) {
-    int a = any(rng), b = any(rng);
-    if (a == b) continue;
-    if (a > b) std::swap(a, b);
-    c.query_index = b;
-    c.match_index = a;
-    if (!graph.addLoop(c).ok) continue;  // the same loop twice
-    loops.push_back({a, b});
-  }
+  // Loops come (ends shared: a few keyframes end several loops), are checked on the way, go,
+  // and come again after the removal (on top of a rebuilt index).
+  auto addLoops = [&](size_t until, int ends) {
+    std::uniform_int_distribution<int> end(0, ends - 1);
+    while (loops.size() < until) {
+      int a = 5 * end(rng), b = 5 * end(rng);
+      if (a == b) continue;
+      if (a > b) std::swap(a, b);
+      c.query_index = b;
+      c.match_index = a;
+      if (!graph.addLoop(c).ok) continue;  // the same loop twice
+      loops.push_back({a, b});
+      if (loops.size() == until / 2) check("half of the loops");
+    }
+  };
+  addLoops(60, n / 5);
   const auto joined = check("60 loops");
   EXPECT_EQ(joined.second, 0) << "the loops join the sequences";
   EXPECT_GT(joined.first, 0);
@@ -168,5 +177,78 @@ TEST(KeyframeGraph, PathLengthIsTheShortestOdometryPathThroughTheLoops) {
   }
   for (int k = 19; k >= 0; --k) loops.erase(loops.begin() + 2 * k);
   check("40 loops after 20 removed");
+  addLoops(70, n / 5);
+  check("30 more loops after the removal");
   EXPECT_EQ(graph.pathLength(42, 42), 0.0);
+}
+
+// A circuit of 10 loop ends driven 50 times, each lap tied to the one before by loops: 10
+// places, not 500, and the walks between them are the shortest stretches of any lap.
+TEST(PlaceGraph, ACircuitDrivenManyTimesIsItsPlaces) {
+  core::PlaceGraph places;
+  const size_t per_lap = 10, laps = 50;
+  auto length = [](size_t lap, size_t k) { return 1.0 + 0.01 * static_cast<double>((lap * 7 + k) % 13); };
+  for (size_t lap = 0; lap < laps; ++lap)
+    for (size_t k = 0; k < per_lap; ++k) {
+      const size_t end = lap * per_lap + k;
+      if (end > 0) places.addStretch(end - 1, end, length(lap, k));
+      if (lap > 0) places.join(end - per_lap, end);
+    }
+  EXPECT_EQ(places.places(), per_lap);
+  // From place 0 to place 3 forwards (the shortest of each stretch), or back round the circuit.
+  std::vector<double> shortest(per_lap + 1, std::numeric_limits<double>::infinity());
+  for (size_t lap = 0; lap < laps; ++lap)
+    for (size_t k = 0; k < per_lap; ++k)
+      if (lap * per_lap + k > 0) shortest[k] = std::min(shortest[k], length(lap, k));
+  const double forwards = shortest[1] + shortest[2] + shortest[3];
+  double backwards = shortest[0];
+  for (size_t k = 4; k < per_lap; ++k) backwards += shortest[k];
+  EXPECT_NEAR(places.shortest({{0, 0.0}}, {{3, 0.0}}, 1e9), std::min(forwards, backwards), 1e-12);
+  // Ends of the last lap stand for their places; offsets add; the bound stops the search.
+  EXPECT_NEAR(places.shortest({{490, 0.5}}, {{493, 0.25}}, 1e9), std::min(forwards, backwards) + 0.75, 1e-12);
+  EXPECT_EQ(places.shortest({{0, 0.0}}, {{3, 0.0}}, 1.0), 1.0);
+  EXPECT_EQ(places.shortest({{0, 0.0}}, {{12345, 0.0}}, 7.0), 7.0) << "an unknown end is no target";
+}
+
+// Moments kept from the start, from midway, or built on first use are the same moments: the
+// same covariances along the chains and through the loops, on two sequences.
+TEST(KeyframeGraph, KeptMomentsAreTheMomentsBuiltOnFirstUse) {
+  core::VerifierConfig config;
+  core::KeyframeGraph lazy(config), early(config), midway(config);
+  early.keepMoments(true, true);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  const int n = 400;
+  for (int i = 0; i < n; ++i) {
+    if (i == 250) t = Eigen::Vector3d(30, 0, 0);
+    t += Eigen::Vector3d(0.3 + 0.1 * unit(rng), 0.2 * unit(rng), 0.02 * unit(rng));
+    const Eigen::Quaterniond q(Eigen::AngleAxisd(0.3 * unit(rng), Eigen::Vector3d::UnitZ()));
+    for (core::KeyframeGraph* g : {&lazy, &early, &midway})
+      ASSERT_TRUE(g->addKeyframe(i, 0.1 * i, i < 250 ? 1 : 2, t, q).ok) << i;
+    if (i == 120) midway.keepMoments(true, false);
+  }
+  core::LoopCandidate c;
+  c.relative_q = Eigen::Quaterniond::Identity();
+  c.relative_t = Eigen::Vector3d(0.1, 0, 0);
+  for (int k = 0; k < 6; ++k) {
+    c.query_index = 260 + 20 * k;
+    c.match_index = 10 + 35 * k;
+    for (core::KeyframeGraph* g : {&lazy, &early, &midway}) ASSERT_TRUE(g->addLoop(c).ok);
+  }
+  for (size_t from : {0u, 37u, 180u, 251u}) {
+    const size_t to = from + 60;
+    Eigen::Matrix4d a, b, m;
+    ASSERT_TRUE(lazy.chainCovariance(from, to, 1.0, &a));
+    ASSERT_TRUE(early.chainCovariance(from, to, 1.0, &b));
+    ASSERT_TRUE(midway.chainCovariance(from, to, 1.0, &m));
+    EXPECT_GT(a.trace(), 0.0);
+    EXPECT_EQ(a, b) << from;
+    EXPECT_EQ(a, m) << from;
+    ASSERT_TRUE(lazy.relativeCovariance(from, 399 - from / 2, 1.0, &a));
+    ASSERT_TRUE(early.relativeCovariance(from, 399 - from / 2, 1.0, &b));
+    ASSERT_TRUE(midway.relativeCovariance(from, 399 - from / 2, 1.0, &m));
+    EXPECT_EQ(a, b) << from;
+    EXPECT_EQ(a, m) << from;
+  }
 }
