@@ -199,7 +199,7 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
         gap.head<3>() = Rd.transpose() * (Pb - (Pa + Rd * (kfs[pb].vio.t - kfs[pa].vio.t)));
         gap[3] = wrapAngle(nb.yaw - (kfs[pb].yaw + dyaw));
         const size_t la = pa - ch.start, lb = pb - ch.start;
-        const ChainMoments& moments = momentsOf(ch);
+        const ChainMomentsView moments = momentsOf(ch);
         const Eigen::Matrix4d Cbb = moments.cross(la, lb, lb);
         const Eigen::Vector4d w = Cbb.ldlt().solve(gap);
         for (size_t p = pa + 1; p < pb; ++p) {

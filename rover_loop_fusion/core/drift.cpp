@@ -26,35 +26,31 @@ void ChainMoments::Sums::add(const Sums& o, double sign) {
 }
 
 void ChainMoments::clear() {
-  p_.clear();
-  R_.clear();
-  cov_.clear();
+  n_ = 0;
   checkpoints_.clear();
 }
 
-void ChainMoments::append(const Eigen::Vector3d& p, const Eigen::Matrix3d& R,
-                          const Eigen::Matrix4d& step_cov) {
-  p_.push_back(p);
-  R_.push_back(R);
-  cov_.push_back(p_.size() == 1 ? Eigen::Matrix4d::Zero() : step_cov);
-  const size_t k = p_.size() - 1;
-  if (k % kStride == 0) {
-    if (k == 0) {
-      checkpoints_.push_back(Sums());
-    } else {
-      Sums s = checkpoints_.back();
-      for (size_t j = k - kStride + 1; j <= k; ++j) s.add(step(j), 1.0);
-      checkpoints_.push_back(s);
+void ChainMoments::extend(const ChainSteps& steps, size_t n) {
+  for (size_t k = n_; k < n; ++k) {
+    if (k % kStride == 0) {
+      if (k == 0) {
+        checkpoints_.push_back(Sums());
+      } else {
+        Sums s = checkpoints_.back();
+        for (size_t j = k - kStride + 1; j <= k; ++j) s.add(step(steps, j), 1.0);
+        checkpoints_.push_back(s);
+      }
     }
   }
+  n_ = std::max(n_, n);
 }
 
-ChainMoments::Sums ChainMoments::step(size_t j) const {
+ChainMoments::Sums ChainMoments::step(const ChainSteps& steps, size_t j) {
   Sums s;
   if (j == 0) return s;
-  const Eigen::Matrix4d& S = cov_[j];
-  const Eigen::Matrix3d& Rj = R_[j];
-  const Eigen::Vector3d& pj = p_[j];
+  const Eigen::Matrix4d S = steps.stepCovariance(j);
+  const Eigen::Matrix3d Rj = steps.rotation(j);
+  const Eigen::Vector3d pj = steps.position(j);
   s.A = Rj * S.topLeftCorner<3, 3>() * Rj.transpose();
   s.b = Rj * S.topRightCorner<3, 1>();
   s.Bp = s.b * pj.transpose();
@@ -64,21 +60,21 @@ ChainMoments::Sums ChainMoments::step(size_t j) const {
   return s;
 }
 
-ChainMoments::Sums ChainMoments::prefix(size_t k) const {
+ChainMoments::Sums ChainMoments::prefix(const ChainSteps& steps, size_t k) const {
   const size_t i = k / kStride;
   Sums s = checkpoints_[i];
-  for (size_t j = i * kStride + 1; j <= k; ++j) s.add(step(j), 1.0);
+  for (size_t j = i * kStride + 1; j <= k; ++j) s.add(step(steps, j), 1.0);
   return s;
 }
 
-Eigen::Matrix4d ChainMoments::cross(size_t a, size_t k, size_t b) const {
+Eigen::Matrix4d ChainMoments::cross(const ChainSteps& steps, size_t a, size_t k, size_t b) const {
   Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
   if (k <= a) return C;
-  Sums s = prefix(k);
-  s.add(prefix(a), -1.0);
+  Sums s = prefix(steps, k);
+  s.add(prefix(steps, a), -1.0);
   const Eigen::Matrix3d E = yawGenerator();
-  const Eigen::Vector3d& pk = p_[k];
-  const Eigen::Vector3d& pb = p_[b];
+  const Eigen::Vector3d pk = steps.position(k);
+  const Eigen::Vector3d pb = steps.position(b);
   // sum W_yy (pk - pj)(pb - pj)^T
   const Eigen::Matrix3d Sdd = s.c * pk * pb.transpose() - pk * s.cp.transpose() - s.cp * pb.transpose() + s.Cpp;
   C.topLeftCorner<3, 3>() = s.A + E * (pk * s.b.transpose() - s.Bp.transpose()) +
@@ -89,11 +85,18 @@ Eigen::Matrix4d ChainMoments::cross(size_t a, size_t k, size_t b) const {
   return C;
 }
 
-Eigen::Matrix4d ChainMoments::relative(size_t a, size_t b, const Eigen::Matrix3d& Ra) const {
+Eigen::Matrix4d ChainMoments::relative(const ChainSteps& steps, size_t a, size_t b, const Eigen::Matrix3d& Ra) const {
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
   T.topLeftCorner<3, 3>() = Ra.transpose();
-  const Eigen::Matrix4d C = cross(a, b, b);
+  const Eigen::Matrix4d C = cross(steps, a, b, b);
   return T * C * T.transpose();
+}
+
+void StoredChainMoments::append(const Eigen::Vector3d& p, const Eigen::Matrix3d& R, const Eigen::Matrix4d& step_cov) {
+  p_.push_back(p);
+  R_.push_back(R);
+  cov_.push_back(p_.size() == 1 ? Eigen::Matrix4d::Zero() : step_cov);
+  moments_.extend(*this, p_.size());
 }
 
 }  // namespace core

@@ -36,22 +36,34 @@ struct DriftModel {
   Eigen::Matrix4d stepCovariance(double length) const;
 };
 
-/// Prefix sums of the step moments of one sequence of keyframes. Positions are indexed
-/// 0..size()-1 within the sequence; step j (j >= 1) goes from j-1 to j.
+/// Keyframe j (0, 1, ...) of a chain: its position, its rotation (full, world frame) and the
+/// covariance of the step that ends at it (j >= 1). What ChainMoments sums; its owner keeps
+/// them (the pose graph's keyframes), so that the moments hold only their checkpoints.
+class ChainSteps {
+ public:
+  virtual ~ChainSteps() = default;
+  virtual Eigen::Vector3d position(size_t j) const = 0;
+  virtual Eigen::Matrix3d rotation(size_t j) const = 0;
+  virtual Eigen::Matrix4d stepCovariance(size_t j) const = 0;
+};
+
+/// Prefix sums of the step moments of one chain of keyframes (ChainSteps), indexed 0..size()-1
+/// within the chain; step j (j >= 1) goes from j-1 to j. Holds a checkpoint of the sums every
+/// kStride keyframes (34 bytes per keyframe); the steps since the last one are summed on each
+/// query, from the same ChainSteps (unchanged since they were added).
 class ChainMoments {
  public:
-  /// Appends keyframe j with its position, rotation (full, world frame) and the covariance of
-  /// the step that ends at it (ignored for the first keyframe).
-  void append(const Eigen::Vector3d& p, const Eigen::Matrix3d& R, const Eigen::Matrix4d& step_cov);
-  size_t size() const { return p_.size(); }
+  /// Extends the sums to the first n keyframes of `steps` (n >= size()).
+  void extend(const ChainSteps& steps, size_t n);
+  size_t size() const { return n_; }
   void clear();
 
   /// Cov(e_k, e_b) of the chain errors relative to keyframe a (a <= k <= b), world frame
   /// (x, y, z, yaw about world z). k == b gives the covariance of keyframe b relative to a.
-  Eigen::Matrix4d cross(size_t a, size_t k, size_t b) const;
+  Eigen::Matrix4d cross(const ChainSteps& steps, size_t a, size_t k, size_t b) const;
   /// Covariance of the pose of b relative to a (a < b, a fixed), translation expressed in
   /// the frame `Ra` (normally a's rotation: the 4-DoF residual's R_a^T), yaw.
-  Eigen::Matrix4d relative(size_t a, size_t b, const Eigen::Matrix3d& Ra) const;
+  Eigen::Matrix4d relative(const ChainSteps& steps, size_t a, size_t b, const Eigen::Matrix3d& Ra) const;
 
  private:
   /// The six sums over steps (0, k]: A = sum W_tt, b = sum W_ty, Bp = sum W_ty p^T,
@@ -66,14 +78,34 @@ class ChainMoments {
     void add(const Sums& o, double sign);
   };
   /// Sums over (0, k]: a stored checkpoint every kStride keyframes plus the steps after it.
-  Sums prefix(size_t k) const;
-  Sums step(size_t j) const;
+  Sums prefix(const ChainSteps& steps, size_t k) const;
+  static Sums step(const ChainSteps& steps, size_t j);
 
   static constexpr size_t kStride = 8;
+  size_t n_ = 0;
+  std::vector<Sums> checkpoints_;  ///< prefix(kStride * i)
+};
+
+/// Steps kept in vectors, with their moments: a chain built step by step (tests, one step).
+class StoredChainMoments : public ChainSteps {
+ public:
+  /// Appends keyframe j with its position, rotation and the covariance of the step that ends
+  /// at it (ignored for the first keyframe).
+  void append(const Eigen::Vector3d& p, const Eigen::Matrix3d& R, const Eigen::Matrix4d& step_cov);
+  size_t size() const { return p_.size(); }
+  Eigen::Matrix4d cross(size_t a, size_t k, size_t b) const { return moments_.cross(*this, a, k, b); }
+  Eigen::Matrix4d relative(size_t a, size_t b, const Eigen::Matrix3d& Ra) const {
+    return moments_.relative(*this, a, b, Ra);
+  }
+  Eigen::Vector3d position(size_t j) const override { return p_[j]; }
+  Eigen::Matrix3d rotation(size_t j) const override { return R_[j]; }
+  Eigen::Matrix4d stepCovariance(size_t j) const override { return cov_[j]; }
+
+ private:
   std::vector<Eigen::Vector3d> p_;
   std::vector<Eigen::Matrix3d> R_;
   std::vector<Eigen::Matrix4d> cov_;
-  std::vector<Sums> checkpoints_;  ///< prefix(kStride * i)
+  ChainMoments moments_;
 };
 
 }  // namespace core

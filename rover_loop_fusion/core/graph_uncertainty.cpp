@@ -24,23 +24,26 @@ void KeyframeGraph::Impl::extendChain(size_t pos) {
   if (unit_used) unitOf(it->second);
 }
 
-const ChainMoments& KeyframeGraph::Impl::momentsOf(SequenceChain& ch) const {
-  moments_used = true;
-  for (size_t pos = ch.start + ch.moments.size(); pos < ch.start + ch.count; ++pos) {
-    const Keyframe& kf = kfs[pos];
-    const double length = pos > ch.start ? (kf.vio.t - kfs[pos - 1].vio.t).norm() : 0.0;
-    const auto given = step_covariance.find(pos);
-    ch.moments.append(kf.vio.t, kf.vio.q.toRotationMatrix(),
-                      given != step_covariance.end() ? given->second : drift.stepCovariance(length));
-  }
-  return ch.moments;
+Eigen::Matrix4d KeyframeGraph::Impl::SegmentSteps::stepCovariance(size_t j) const {
+  if (unit_) return unit_cov_;
+  const size_t pos = start_ + j;
+  const auto given = m_.step_covariance.find(pos);
+  if (given != m_.step_covariance.end()) return given->second;
+  return m_.drift.stepCovariance(j > 0 ? (m_.kfs[pos].vio.t - m_.kfs[pos - 1].vio.t).norm() : 0.0);
 }
 
-const ChainMoments& KeyframeGraph::Impl::unitOf(SequenceChain& ch) const {
+KeyframeGraph::Impl::ChainMomentsView KeyframeGraph::Impl::momentsOf(SequenceChain& ch) const {
+  moments_used = true;
+  const SegmentSteps steps(*this, ch.start, false);
+  ch.moments.extend(steps, ch.count);
+  return ChainMomentsView{ch.moments, steps};
+}
+
+KeyframeGraph::Impl::ChainMomentsView KeyframeGraph::Impl::unitOf(SequenceChain& ch) const {
   unit_used = true;
-  for (size_t pos = ch.start + ch.unit.size(); pos < ch.start + ch.count; ++pos)
-    ch.unit.append(kfs[pos].vio.t, kfs[pos].vio.q.toRotationMatrix(), unitStepCovariance());
-  return ch.unit;
+  const SegmentSteps steps(*this, ch.start, true);
+  ch.unit.extend(steps, ch.count);
+  return ChainMomentsView{ch.unit, steps};
 }
 
 void KeyframeGraph::Impl::rebuildMoments(int sequence) {

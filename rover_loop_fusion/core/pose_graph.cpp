@@ -394,6 +394,10 @@ double KeyframeGraph::innovation(const LoopCandidate& c, size_t qpos, size_t mpo
 
 double KeyframeGraph::pathLength(size_t from, size_t to) const { return impl_->pathLength(from, to); }
 
+void KeyframeGraph::keepPathLengths() {
+  if (impl_->places_stale) impl_->rebuildPlaces();
+}
+
 int KeyframeGraph::segmentAt(size_t position) const { return impl_->kfs[position].segment; }
 
 bool KeyframeGraph::vioAt(size_t position, Pose* pose) const {

@@ -129,6 +129,10 @@ class KeyframeGraph {
   /// Shortest odometry path [m] between two keyframes through the graph: along a sequence by
   /// arc length, across accepted loops for free. Infinite if nothing connects them.
   double pathLength(size_t from, size_t to) const;
+  /// Keep what pathLength searches (the places that loops tie together) up to date as loops
+  /// are added from now on. Without it, it is built on the first pathLength, which then pays
+  /// for every loop before it at once (a removed loop makes the next one rebuild it too).
+  void keepPathLengths();
 
   // ---- optimisation ---------------------------------------------------------------------------
   /// Solves the window [match - window_margin, newest] of the query's connected sequences,

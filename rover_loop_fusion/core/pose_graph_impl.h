@@ -121,10 +121,10 @@ struct KeyframeGraph::Impl {
     bool is_from;
   };
   std::map<size_t, std::vector<LoopEnd>> loop_ends;
-  /// The loop ends as places (core/place_graph.h), for pathLength: built from `loop_ends` on
-  /// the first pathLength and on the first after a removal (`places_stale`), kept up to date
-  /// as loops are added in between (a graph that never asks, the node's loop_fusion stand-in,
-  /// never builds it).
+  /// The loop ends as places (core/place_graph.h), for pathLength: built from `loop_ends` by
+  /// keepPathLengths, the first pathLength or the first after a removal (`places_stale`), kept
+  /// up to date as loops are added in between (a graph that never asks, the node's
+  /// loop_fusion stand-in, never builds it).
   mutable PlaceGraph places;
   mutable bool places_stale = true;
   std::map<int, int> seg_parent;     // union-find over segments
@@ -140,13 +140,41 @@ struct KeyframeGraph::Impl {
   // segment) the prefix moments of the drift model along its VIO poses, kept from the start if
   // the verifier's configuration will need them (keepMoments), else built when first needed
   // (momentsOf, unitOf): a graph that never needs them (the node's loop_fusion stand-in, the
-  // metric rule without a long trial) does not pay ~0.5 kB per keyframe for them.
+  // metric rule without a long trial) does not pay for them (~70 bytes per keyframe, both kinds:
+  // the moments hold checkpoints; the steps they sum are the keyframes' VIO poses, SegmentSteps).
   struct SequenceChain {
     size_t start = 0;
     size_t count = 0;  // keyframes of the segment so far
     ChainMoments moments;  // its first moments.size() keyframes
     /// The same with loop_fusion's unit weighting (condensed trials; 4-DoF only).
     ChainMoments unit;
+  };
+  /// A segment's keyframes as the steps of its moments: VIO positions and rotations, and the
+  /// drift model's step covariance (or the one handed in with the keyframe), or loop_fusion's
+  /// unit weighting.
+  class SegmentSteps : public ChainSteps {
+   public:
+    SegmentSteps(const Impl& m, size_t start, bool unit) : m_(m), start_(start), unit_(unit) {
+      if (unit) unit_cov_ = m.unitStepCovariance();
+    }
+    Eigen::Vector3d position(size_t j) const override { return m_.kfs[start_ + j].vio.t; }
+    Eigen::Matrix3d rotation(size_t j) const override { return m_.kfs[start_ + j].vio.q.toRotationMatrix(); }
+    Eigen::Matrix4d stepCovariance(size_t j) const override;
+
+   private:
+    const Impl& m_;
+    size_t start_;
+    bool unit_;
+    Eigen::Matrix4d unit_cov_ = Eigen::Matrix4d::Zero();
+  };
+  /// A chain's moments with the steps they sum (ChainMoments' queries need both).
+  struct ChainMomentsView {
+    const ChainMoments& moments;
+    SegmentSteps steps;
+    Eigen::Matrix4d cross(size_t a, size_t k, size_t b) const { return moments.cross(steps, a, k, b); }
+    Eigen::Matrix4d relative(size_t a, size_t b, const Eigen::Matrix3d& Ra) const {
+      return moments.relative(steps, a, b, Ra);
+    }
   };
   /// mutable: the moments are filled in on first use by const readers (one thread at a time,
   /// as the whole graph).
@@ -326,8 +354,8 @@ struct KeyframeGraph::Impl {
   void extendChain(size_t pos);
   /// The chain's drift-model (unit-weight) moments over all its keyframes, appended now for
   /// the keyframes that arrived since they were last needed.
-  const ChainMoments& momentsOf(SequenceChain& ch) const;
-  const ChainMoments& unitOf(SequenceChain& ch) const;
+  ChainMomentsView momentsOf(SequenceChain& ch) const;
+  ChainMomentsView unitOf(SequenceChain& ch) const;
   /// After loop_fusion's shift of a sequence: its segments' moments dropped, to be built again
   /// from the new poses when needed.
   void rebuildMoments(int sequence);

@@ -242,7 +242,7 @@ TEST(Chi2Verifier, CommitPlacesEveryKeyframeAsTheFullWeightedSolve) {
     R.push_back(t[j].vio.q.toRotationMatrix());
   }
   for (size_t j = 1; j < t.size(); ++j) {
-    core::ChainMoments step;
+    core::StoredChainMoments step;
     step.append(t[j - 1].vio.t, R[j - 1], Eigen::Matrix4d::Zero());
     step.append(t[j].vio.t, R[j], dm.stepCovariance((t[j].vio.t - t[j - 1].vio.t).norm()));
     core::CondensedEdge e;

@@ -44,8 +44,8 @@ Chain makeChain(size_t n, const core::DriftModel& model, uint32_t seed = 3) {
   return c;
 }
 
-core::ChainMoments moments(const Chain& c) {
-  core::ChainMoments m;
+core::StoredChainMoments moments(const Chain& c) {
+  core::StoredChainMoments m;
   for (size_t j = 0; j < c.p.size(); ++j) m.append(c.p[j], c.R[j], c.cov[j]);
   return m;
 }
@@ -93,7 +93,7 @@ core::CondensedEdge odometryEdge(const Chain& c, size_t a, size_t b, const Eigen
 TEST(ChainMoments, RelativeCovarianceEqualsTheStepByStepSumForAnyPair) {
   core::DriftModel model;
   const Chain c = makeChain(100, model);
-  const core::ChainMoments m = moments(c);
+  const core::StoredChainMoments m = moments(c);
   const size_t pairs[][2] = {{0, 1}, {0, 99}, {7, 8}, {8, 16}, {3, 61}, {15, 17}, {40, 99}};
   for (const auto& ab : pairs) {
     const Eigen::Matrix4d expected = bySteps(c, ab[0], ab[1]);
@@ -125,7 +125,7 @@ TEST(CondensedGraph, ChainsCondensedToOneEdgeGiveTheSameMarginalWithLoops) {
   Eigen::Matrix4d loop_cov = Eigen::Matrix4d::Identity() * 0.05 * 0.05;
   loop_cov(3, 3) = std::pow(M_PI / 180.0, 2);
   const std::vector<std::pair<size_t, size_t>> loops = {{10, 70}, {30, 100}, {12, 110}};
-  const core::ChainMoments m = moments(c);
+  const core::StoredChainMoments m = moments(c);
   // Full graph: every keyframe.
   core::CondensedGraph full;
   for (size_t j = 0; j < c.p.size(); ++j) full.addAnchor(stateOf(c, j), c.pitch[j], c.roll[j], false);
@@ -155,7 +155,7 @@ TEST(CondensedGraph, ChainsCondensedToOneEdgeGiveTheSameMarginalWithLoops) {
 TEST(CondensedGraph, SolveMovesAnchorsToSatisfyALoopAndReportsSingularSystems) {
   core::DriftModel model;
   const Chain c = makeChain(80, model, 9);
-  const core::ChainMoments m = moments(c);
+  const core::StoredChainMoments m = moments(c);
   core::CondensedGraph cg;
   cg.addAnchor(stateOf(c, 0), c.pitch[0], c.roll[0], true);
   cg.addAnchor(stateOf(c, 79), c.pitch[79], c.roll[79], false);
