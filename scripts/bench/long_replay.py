@@ -46,10 +46,15 @@ def rss_mb(pid):
     return float("nan")
 
 
-def count_rows(path):
+def count_final_rows(path):
+    """Candidates decided so far: verdict rows that are final (a held candidate's deferred row,
+    final=0, is not; nor is a line still being written)."""
     try:
-        with open(path) as f:
-            return max(0, sum(1 for _ in f) - 1)
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            if not reader.fieldnames or "final" not in reader.fieldnames:
+                return sum(1 for _ in reader)
+            return sum(1 for r in reader if r.get("final") == "1")
     except OSError:
         return 0
 
@@ -140,7 +145,7 @@ def main(argv=None):
         last_count, last_change = 0, time.time()
         while True:
             now = time.time()
-            done = count_rows(log)
+            done = count_final_rows(log)
             rss_rows.append((now - start, done, rss_mb(node.pid)))
             if play_end is None and play.poll() is not None:
                 play_end = now - start
