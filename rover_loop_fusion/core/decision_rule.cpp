@@ -118,8 +118,8 @@ class Chi2Rule : public DecisionRule {
                      Decided* decided) override {
     RuleOutcome out;
     measured->innovation = graph_.innovation(c, qpos, mpos);
-    // (No path length: its Dijkstra over every loop end would be the one cost that grows with
-    // the run; the chi2 decision does not use it.)
+    // (No path length: the chi2 decision does not use it, and its verifier keeps no places
+    // for it.)
     Eigen::Matrix4d C;
     if (!graph_.relativeCovariance(mpos, qpos, calibration_.scale(), &C)) {
       out.check.passed = false;

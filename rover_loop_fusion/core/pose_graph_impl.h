@@ -352,8 +352,8 @@ struct KeyframeGraph::Impl {
   // ---- uncertainty (graph_uncertainty.cpp; core/drift.h) -----------------------------------
   /// Counts keyframe `pos` into its segment's chain (the moments follow when needed).
   void extendChain(size_t pos);
-  /// The chain's drift-model (unit-weight) moments over all its keyframes, appended now for
-  /// the keyframes that arrived since they were last needed.
+  /// The chain's drift-model (unit-weight) moments over all its keyframes (extended now over
+  /// the keyframes that arrived since they were last needed), with the steps they sum.
   ChainMomentsView momentsOf(SequenceChain& ch) const;
   ChainMomentsView unitOf(SequenceChain& ch) const;
   /// After loop_fusion's shift of a sequence: its segments' moments dropped, to be built again
