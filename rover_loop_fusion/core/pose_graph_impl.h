@@ -252,7 +252,7 @@ struct KeyframeGraph::Impl {
   /// stretch between them if they share a segment, or a walk over `places` from the loop ends
   /// next to `from` to those next to `to` (arc-length differences within a segment).
   double pathLength(size_t from, size_t to) const;
-  /// The loop ends before and after `pos` on its segment (false: none), with their distances.
+  /// The nearest loop end before (after) `pos` on its segment; false if there is none.
   bool loopEndBefore(size_t pos, size_t* end) const;
   bool loopEndAfter(size_t pos, size_t* end) const;
   /// A new loop end `pos` (not yet in `loop_ends`): its stretches to the loop ends beside it.
