@@ -25,6 +25,8 @@ import subprocess
 import sys
 import time
 
+import yaml
+
 from roverlib import bag as rbag
 from roverlib import bench, scenario, scenes
 
@@ -183,6 +185,14 @@ def main(argv=None):
     for r, lab in zip(rows, label_of):
         if lab in by_label:
             by_label[lab][r["reason"]] = by_label[lab].get(r["reason"], 0) + 1
+    # The verifier's time budget (the YAML's, or a --set): verifications that took longer.
+    with open(a.config) as f:
+        budget_ms = float((yaml.safe_load(f) or {}).get("time_budget_ms", 0.0))
+    for o in a.overrides:
+        key, value = o.split("=", 1)
+        if key == "time_budget_ms":
+            budget_ms = float(value)
+    over = sum(1 for v in lat if budget_ms > 0 and v > budget_ms)
     rss = [r[2] for r in rss_rows if r[2] == r[2]]
     with open(os.path.join(a.out, "rss.csv"), "w") as f:
         f.write("seconds,verdicts,rss_mb\n")
@@ -201,7 +211,8 @@ def main(argv=None):
         *(f"  {name} candidates: " + ", ".join(f"{k} {v}" for k, v in sorted(by_label[lab].items()))
           for name, lab in (("true", 1), ("false", 0))),
         f"  verification latency [ms]: p50 {percentile(lat, .5):.2f}  p90 {percentile(lat, .9):.2f}  "
-        f"p99 {percentile(lat, .99):.2f}  max {max(lat) if lat else float('nan'):.2f}",
+        f"p99 {percentile(lat, .99):.2f}  max {max(lat) if lat else float('nan'):.2f}; "
+        f"over the {budget_ms:g} ms budget: {over}",
         f"  node RSS [MB]: start {rss[0] if rss else float('nan'):.1f}, after a quarter of the verdicts "
         f"{quarter[0][2] if quarter else float('nan'):.1f}, peak {max(rss) if rss else float('nan'):.1f}, "
         f"end {rss[-1] if rss else float('nan'):.1f}",
