@@ -25,7 +25,6 @@ class PlaceGraph {
  public:
   /// Forget every place (before adding them all again).
   void clear();
-  bool empty() const { return parent_.empty(); }
   /// A stretch of odometry of `length` between the loop ends a and b: the places of a and b
   /// are adjacent, at most that far apart.
   void addStretch(size_t a, size_t b, double length);
@@ -36,6 +35,7 @@ class PlaceGraph {
   /// shorter than `bound` (the search stops there).
   double shortest(const std::vector<std::pair<size_t, double>>& sources,
                   const std::vector<std::pair<size_t, double>>& targets, double bound) const;
+  /// How many places there are (each a loop end or several tied by loops).
   size_t places() const { return adjacent_.size(); }
 
  private:
