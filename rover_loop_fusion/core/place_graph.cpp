@@ -33,6 +33,11 @@ size_t PlaceGraph::placeOf(size_t end) const {
   return root;
 }
 
+size_t PlaceGraph::endsOf(size_t place) const {
+  const auto it = size_.find(place);
+  return it == size_.end() ? 1 : it->second;
+}
+
 void PlaceGraph::keepShorter(std::unordered_map<size_t, double>& to, size_t place, double length) {
   const auto it = to.find(place);
   if (it == to.end())
@@ -55,13 +60,9 @@ void PlaceGraph::join(size_t a, size_t b) {
   adjacent_[keep];
   adjacent_[gone];
   if (keep == gone) return;
-  size_t& n_keep = size_[keep];
-  size_t& n_gone = size_[gone];
-  if (n_keep == 0) n_keep = 1;
-  if (n_gone == 0) n_gone = 1;
-  if (n_keep < n_gone) std::swap(keep, gone);  // the smaller place joins the larger
+  if (endsOf(keep) < endsOf(gone)) std::swap(keep, gone);  // the smaller place joins the larger
   parent_[gone] = keep;
-  size_[keep] += size_[gone];
+  size_[keep] = endsOf(keep) + endsOf(gone);
   size_.erase(gone);
   std::unordered_map<size_t, double> moved;
   moved.swap(adjacent_[gone]);

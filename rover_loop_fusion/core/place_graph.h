@@ -40,10 +40,11 @@ class PlaceGraph {
 
  private:
   size_t placeOf(size_t end) const;  // the union-find root; a new loop end is a place of its own
+  size_t endsOf(size_t place) const;  // its loop ends (1 for a place not in size_)
   static void keepShorter(std::unordered_map<size_t, double>& to, size_t place, double length);
 
   mutable std::unordered_map<size_t, size_t> parent_;  // loop end -> parent (path compression)
-  std::unordered_map<size_t, size_t> size_;             // place -> number of loop ends
+  std::unordered_map<size_t, size_t> size_;             // place -> its loop ends, if more than one
   /// place -> adjacent place -> the shortest stretch between them (both directions).
   std::unordered_map<size_t, std::unordered_map<size_t, double>> adjacent_;
 };
