@@ -66,7 +66,7 @@ CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
   L.Ja(3, 3) = -1.0;
   L.Jb.topLeftCorner<3, 3>() = Ra.transpose();
   L.Jb(3, 3) = 1.0;
-  const Eigen::Matrix4d& W = sqrt_info_[e];
+  const Eigen::Matrix4d W = std::sqrt(std::max(0.0, ed.weight)) * sqrt_info_[e];
   L.r = W * L.r;
   L.Ja = W * L.Ja;
   L.Jb = W * L.Jb;

@@ -40,6 +40,8 @@ struct CondensedEdge {
   /// as Ceres' HuberLoss on loop_fusion's loop residuals. 0 = none.
   double huber = 0.0;
   int count = 1;
+  /// Scales the edge's information (a graduated non-convexity weight; 0: the edge is left out).
+  double weight = 1.0;
 };
 
 class CondensedGraph {
@@ -52,8 +54,11 @@ class CondensedGraph {
   size_t edgeCount() const { return edges_.size(); }
   const AnchorState& state(int i) const { return states_[i]; }
   void setFixed(int i, bool fixed) { fixed_[i] = fixed; }
+  void setWeight(size_t e, double weight) { edges_[e].weight = weight; }
+  const CondensedEdge& edge(size_t e) const { return edges_[e]; }
 
-  /// The residual (4) of edge e at the current states; its chi-square via the information.
+  /// The residual (4) of edge e at the current states; its chi-square via the information
+  /// (whatever its weight).
   Eigen::Vector4d residual(size_t e) const;
   double chi2(size_t e) const;
 

@@ -9,6 +9,9 @@
 //               prior (Actions::judge) and that no rival hypothesis of its stretch competes with
 //               is released; one that fails its test or waits longer than revisit_window is
 //               dropped.
+//   kGlobal     decision revisit with global_check: rejected for contradicting the graph, held
+//               in the verifier's global pool (not here: core/global_release.cpp) until the global
+//               pass releases it or global_window expires.
 // This unit owns the bookkeeping: which held candidates form a group (same kind, same segments,
 // queries within confirm_stretch (revisit: revisit_stretch), every pair of the last confirm_count consistent), which group
 // is due (confirmed, expired, blocked by a rival group of its stretch) and in which order. What
@@ -25,7 +28,7 @@
 namespace rover_loop_fusion {
 namespace core {
 
-enum class HoldKind { kNoPrior, kWeakPrior, kRival, kRevisit };
+enum class HoldKind { kNoPrior, kWeakPrior, kRival, kRevisit, kGlobal };
 
 struct HeldCandidate {
   LoopCandidate candidate;

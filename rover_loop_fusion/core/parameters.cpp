@@ -249,6 +249,28 @@ std::vector<Parameter> makeTable() {
                      "Mahalanobis distance) when rivals compete"));
   t.push_back(number("revisit_margin", "", FIELD(revisit.revisit_margin), 0.0, 100.0, false,
                      "a hypothesis is released only if its misfit is lower than every rival's by this"));
+  // decision revisit's global pass (core/global_pass.cpp, Verifier::globalPass).
+  t.push_back(boolean("global_check", FIELD(global.global_check),
+                      "hold what the per-candidate test rejects for contradicting the graph and release "
+                      "the inliers of a robust solve over every loop (decision revisit)"));
+  t.push_back(integer("global_period", "keyframes", FIELD(global.global_period), 1, 100000,
+                      "keyframes between two global passes while candidates are held"));
+  t.push_back(integer("global_window", "keyframes", FIELD(global.global_window), 1, 10000000,
+                      "a candidate held for the global pass and not released within this many keyframes is dropped"));
+  t.push_back(integer("global_max_held", "", FIELD(global.global_max_held), 1, 100000,
+                      "candidates held for the global pass at most (the oldest is dropped): bounds its cost"));
+  t.push_back(number("global_inlier_probability", "", FIELD(global.global_inlier_probability), 0.5, 1.0 - 1e-12, false,
+                     "chi-square quantile (4 dof) of a loop's residual that counts as an inlier, and of its "
+                     "innovation against the other loops"));
+  t.push_back(number("global_prior_probability", "", FIELD(global.global_prior_probability), 0.5, 1.0 - 1e-12, false,
+                     "an inlier is released only if its innovation against the prior alone (the accepted "
+                     "loops) lies within this chi-square quantile (4 dof)"));
+  t.push_back(number("global_tear_probability", "", FIELD(global.global_tear_probability), 0.5, 1.0 - 1e-12, false,
+                     "chi-square quantile (4 dof) beyond which the robust solution tears a chain of odometry; "
+                     "an inlier whose cycle holds a torn chain is not released"));
+  t.push_back(number("global_max_sigma", "m", FIELD(global.global_max_sigma), 0.0, 1000.0, false,
+                     "an inlier is released only if the other loops pin its relative position down to this std; "
+                     "0: no bound"));
   return t;
 }
 

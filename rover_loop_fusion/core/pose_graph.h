@@ -19,6 +19,7 @@
 
 #include <Eigen/Core>
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -63,6 +64,25 @@ struct BatchSolveResult {
   double solve_ms = 0.0;
   int free_keyframes = 0;
   std::vector<Pose> poses;  ///< one per keyframe, in trajectory() order
+};
+
+/// What the global pass (KeyframeGraph::globalConsistency) found for one candidate loop.
+struct GlobalLoop {
+  /// Weight above 0.5 at the end of the robust solve and its residual within the inlier quantile.
+  bool inlier = false;
+  /// An inlier whose cycle (the odometry between its ends) the robust solution bends beyond the
+  /// tear quantile: it is part of a solution that tears the trajectory (not tested further).
+  bool torn = false;
+  /// Its residual's chi-square in the robust solution (NaN: not solved: no prior, a failed solve).
+  double chi2 = std::numeric_limits<double>::quiet_NaN();
+  /// Inliers, not torn: tested against the graph without them (leave one out): d2 and sigma set.
+  bool pinned = false;
+  /// Mahalanobis distance of the candidate from the relative pose the graph without it gives
+  /// its ends (that pose's covariance plus the loop's).
+  double d2 = std::numeric_limits<double>::quiet_NaN();
+  /// The largest standard deviation of that relative position [m]: how tightly the other loops
+  /// pin the candidate down.
+  double sigma = std::numeric_limits<double>::quiet_NaN();
 };
 
 class KeyframeGraph {
@@ -204,6 +224,18 @@ class KeyframeGraph {
   /// The accepted loops whose query keyframe lies at positions [first, last] (a revisit's
   /// stretch), in the order they were added. O(loops).
   std::vector<LoopCandidate> loopsWithQueryIn(size_t first, size_t last) const;
+  /// Decision revisit's global pass (core/global_pass.cpp): the `candidates` as robust loop
+  /// edges (graduated non-convexity, truncated quadratic loss at `inlier_chi2`) on the condensed
+  /// graph of their component with its accepted loops, drift variances times `variance_scale`.
+  /// An inlier whose odometry between its ends the solution bends beyond `tear_chi2` (a chain
+  /// edge's chi-square) is torn; the other inliers are tested against the graph without them
+  /// (leave one out; only those marked in `test_alone`, if it is not empty: one solve each).
+  /// One GlobalLoop per candidate, in order. Changes nothing. False if a
+  /// component's condensed graph could not be built or solved (its candidates stay without a
+  /// result: chi2 NaN).
+  bool globalConsistency(const std::vector<LoopCandidate>& candidates, double inlier_chi2, double tear_chi2,
+                         double variance_scale, const std::vector<bool>& test_alone,
+                         std::vector<GlobalLoop>* out) const;
   /// X of every keyframe, and X := such a copy again (a revocation that did not go through puts
   /// the estimate back; false, X unchanged, if the keyframe count differs).
   std::vector<KeyframeState> estimates() const;

@@ -11,6 +11,7 @@ set(ROVER_CORE_SOURCES
   trial_solve.cpp
   condensed_trial.cpp
   graph_uncertainty.cpp
+  global_pass.cpp
   batch_solve.cpp
   decision.cpp
   decision_rule.cpp
@@ -19,5 +20,6 @@ set(ROVER_CORE_SOURCES
   parameters.cpp
   verifier.cpp
   revocation.cpp
+  global_release.cpp
   verdict_csv.cpp
 )

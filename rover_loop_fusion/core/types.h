@@ -394,6 +394,41 @@ struct RevisitConfig {
   double revisit_margin = 4.0;
 };
 
+/// Decision revisit's global pass (docs/method.md): what the per-candidate test and the revisit
+/// hypotheses leave out (single-candidate revisits after long drift) judged against every loop
+/// at once.
+struct GlobalConfig {
+  /// On (decision revisit only; off in every shipped YAML: docs/results.md, "The global pass"):
+  /// candidates rejected for contradicting the graph (gate, score, drift) and members of dropped
+  /// revisit hypotheses are held in a pool; every global_period keyframes a graduated
+  /// non-convexity solve with a truncated quadratic loss over the condensed graph (accepted
+  /// loops + the pool) finds the pool's inliers. An inlier is released if the solution does not
+  /// tear the odometry of its cycle (global_tear_probability), the other loops predict it
+  /// (leave one out: within global_inlier_probability, std <= global_max_sigma) and its
+  /// innovation against the prior of the accepted loops alone lies within
+  /// global_prior_probability.
+  bool global_check = false;
+  /// Keyframes between two passes (while candidates are held).
+  int global_period = 25;
+  /// A pooled candidate not released within this many keyframes is dropped.
+  int global_window = 5000;
+  /// Candidates pooled at most (the oldest is dropped first): bounds the cost of a pass.
+  int global_max_held = 400;
+  /// Chi-square quantile (4 dof) of a loop's residual that counts as an inlier, and of its
+  /// leave-one-out innovation.
+  double global_inlier_probability = 0.99;
+  /// A pooled inlier is released only if its innovation against the prior alone (the accepted
+  /// loops, not the pool) lies within this chi-square quantile (4 dof).
+  double global_prior_probability = 0.95;
+  /// Chi-square quantile (4 dof) beyond which a chain of odometry between two anchors counts as
+  /// torn by the robust solution: an inlier whose cycle holds a torn chain is not released (a
+  /// row of look-alikes that agree with each other bends the odometry instead).
+  double global_tear_probability = 0.999;
+  /// A pooled inlier is released only if the other loops predict its relative pose this well:
+  /// the leave-one-out relative position's largest std [m] (0: no bound).
+  double global_max_sigma = 1.0;
+};
+
 /// The verifier's parameters, nested by concern. Every field is named by its key (YAML, ROS
 /// parameter, rover_replay flag); core/parameters.h is the one source of each key's text.
 struct VerifierConfig {
@@ -411,6 +446,7 @@ struct VerifierConfig {
   Chi2Config chi2;
   HoldConfig hold;
   RevisitConfig revisit;
+  GlobalConfig global;
 
   /// Empty when every field lies in its range (the table of core/parameters.h); otherwise
   /// says which fields are wrong and why.

@@ -60,6 +60,9 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
   std::lock_guard<std::mutex> lock(mutex_);
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
   if (!held_.empty()) settle();
+  if (!global_pool_.empty() &&
+      graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period))
+    globalPass();
   return s;
 }
 
@@ -75,7 +78,8 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   // A failed test rejects, unless the candidate is held as a rival of accepted loops (revoke_group).
   auto rejectOrHold = [&](const Check& failed) {
     std::string detail = failed.detail;
-    if (holdAsRival(c, qpos, mpos, failed.reason, &detail)) return withNumbers(Verdict::Defer(c, detail), measured, t0);
+    if (holdAsRival(c, qpos, mpos, failed.reason, &detail) || holdForGlobal(c, qpos, mpos, failed.reason, &detail))
+      return withNumbers(Verdict::Defer(c, detail), measured, t0);
     return reject(failed.reason, failed.detail);
   };
 
@@ -204,7 +208,7 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return held_.size();
+  return held_.size() + global_pool_.size();
 }
 
 bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const {
@@ -231,7 +235,8 @@ void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict v
 
 void Verifier::drop(const HeldGroup& group, const std::string& why) {
   for (const HeldCandidate& h : group)
-    decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, why));
+    if (!addToGlobalPool(h))
+      decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, why));
 }
 
 void Verifier::settle() {
@@ -271,8 +276,12 @@ bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
 void Verifier::release(const HeldGroup& group) {
   std::ostringstream why;
   const bool revisit = group.front().kind == HoldKind::kRevisit;
+  const bool global = group.front().kind == HoldKind::kGlobal;
   if (revisit)
     why << "released with its revisit hypothesis: " << group.size() << " mutually consistent candidates (loops ";
+  else if (global)
+    why << "released by the global pass: " << group.size()
+        << " inliers of the robust solve over every loop, each pinned down by the others (loops ";
   else
     why << "confirmed: " << group.size() << " held candidates agree with each other (loops ";
   why << group.front().candidate.query_index << "->" << group.front().candidate.match_index << " .. "
@@ -299,13 +308,15 @@ void Verifier::release(const HeldGroup& group) {
       if (learn) rule_->learn(decided);  // what a confirmed revisit says about the drift
       decide(LoopDecision::Kind::kRelease, h.candidate, Verdict::Accept(h.candidate, why.str()));
       committed.push_back(&h);
-      if (revisit) first_match = std::min(first_match, h.match_pos);
+      if (revisit || global) first_match = std::min(first_match, h.match_pos);
     }
   }
   if (committed.empty()) return;
   // One update of the estimate for the whole group; in the host's loop-closure path like a
   // commit: bounded when the group had no prior.
-  rule_->updateEstimate(revisit ? first_match : committed.front()->match_pos, committed.back()->query_pos,
+  size_t newest = committed.back()->query_pos;
+  for (const HeldCandidate* h : committed) newest = std::max(newest, h->query_pos);
+  rule_->updateEstimate(revisit || global ? first_match : committed.front()->match_pos, newest,
                         committed.front()->kind == HoldKind::kNoPrior ? config_.trial.time_budget_ms : 0.0);
 }
 

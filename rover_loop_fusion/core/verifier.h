@@ -139,6 +139,16 @@ class Verifier {
   /// drop the group.
   void settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops);
   HeldCandidate heldFor(const LoopCandidate& c) const;
+  /// global_check: holds a candidate rejected for `reason` in the global pool (appends why to
+  /// *detail); false if it stays rejected (core/global_release.cpp).
+  bool holdForGlobal(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
+  /// global_check: a candidate (held for the pool, or a member of a dropped revisit hypothesis)
+  /// joins the global pool (the oldest is dropped when it is full); false if it does not qualify
+  /// (then it is rejected or dropped).
+  bool addToGlobalPool(const HeldCandidate& h);
+  /// global_check: the global pass over the pool (every global_period keyframes): releases the
+  /// inliers the other loops pin down, drops what waited longer than global_window.
+  void globalPass();
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
   void release(const HeldGroup& group);
@@ -160,6 +170,8 @@ class Verifier {
   std::unique_ptr<DecisionRule> rule_;
   Pending pending_;
   HeldCandidates held_;
+  std::vector<HeldCandidate> global_pool_;  ///< global_check: oldest first
+  size_t last_global_pass_ = 0;             ///< keyframes at the last global pass
   std::vector<LoopDecision> decisions_;    ///< not yet taken
   std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
 };

@@ -1,0 +1,187 @@
+// Decision revisit's global pass (KeyframeGraph::globalConsistency): candidate loops judged
+// against every loop at once, for the revisits that yield a single candidate after long drift
+// (city-scale routes), where neither the per-candidate trial nor a revisit hypothesis can.
+//
+// On the condensed graph of a component (core/condensed.h: the accepted loops, the drift
+// model's or the data's covariance for the odometry between anchors) the candidates are added
+// as loop edges with loopCovariance() and solved by graduated non-convexity with a truncated
+// quadratic loss (Yang et al., "Graduated Non-Convexity for Robust Spatial Perception", 2020):
+// weighted Gauss-Newton, each candidate's weight from its residual, the loss sharpened from
+// convex to truncated step by step. Accepted loops keep their weight (they passed their own
+// test). A candidate with weight > 0.5 and its residual within the inlier quantile at the end is
+// an inlier.
+//
+// An inlier of a robust solve is not yet evidence: a loop that nothing else constrains fits
+// any drift. So each inlier is also tested against the others alone (leave one out): the
+// graph without it is solved again, and the relative pose its ends get there is compared with
+// the candidate in units of that relative pose's covariance (the marginal through the graph)
+// plus the loop's. How tightly the others pin it down (sigma) is reported; the caller bounds it.
+// And the odometry's loss is not robust: a row of look-alikes that agree with each other can be
+// absorbed by bending it. An inlier whose cycle (the chains of odometry between its ends) the
+// solution bends beyond the tear quantile is marked torn.
+//
+// What this cannot tell apart (measured: docs/results.md, "The global pass"): a revisit of
+// look-alikes that agree with each other and lie within the prior's uncertainty (near rows,
+// a consistently shifted stretch). The verifier adds the prior test (core/global_release.cpp).
+#include "rover_loop_fusion/core/pose_graph_impl.h"
+
+#include "rover_loop_fusion/core/decision.h"
+#include "rover_loop_fusion/core/geometry.h"
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <vector>
+
+namespace rover_loop_fusion {
+namespace core {
+
+namespace {
+
+/// Graduated non-convexity: the factor by which the truncated loss sharpens per step, and how
+/// many steps at most (from mu ~ 1e-3 to 1e6 takes ~60).
+constexpr double kGncFactor = 1.4;
+constexpr int kGncMaxSteps = 80;
+constexpr double kGncMaxMu = 1e6;
+/// Gauss-Newton iterations per step (warm-started from the previous step's solution).
+constexpr int kStepIterations = 5;
+constexpr double kTolerance = 1e-6;
+
+/// The truncated least squares weight of a residual chi-square r2 at control parameter mu.
+double tlsWeight(double r2, double c2, double mu) {
+  if (r2 >= (mu + 1.0) / mu * c2) return 0.0;
+  if (r2 <= mu / (mu + 1.0) * c2) return 1.0;
+  return std::min(1.0, std::max(0.0, std::sqrt(c2 * mu * (mu + 1.0) / r2) - mu));
+}
+
+}  // namespace
+
+bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidates, double inlier_chi2,
+                                      double tear_chi2, double variance_scale, const std::vector<bool>& test_alone,
+                                      std::vector<GlobalLoop>* out) const {
+  const Impl& m = *impl_;
+  out->assign(candidates.size(), GlobalLoop());
+  struct Ends {
+    size_t i, match, query;
+  };
+  std::map<int, std::vector<Ends>> by_component;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    size_t q = 0, mp = 0;
+    if (!find(candidates[i].query_index, &q) || !find(candidates[i].match_index, &mp) || mp >= q) continue;
+    const int comp = m.componentOf(q);
+    if (m.componentOf(mp) != comp) continue;
+    by_component[comp].push_back({i, mp, q});
+  }
+  bool all_ok = true;
+  const Eigen::Matrix4d loop_cov = m.loopCovariance();
+  for (const auto& kv : by_component) {
+    const std::vector<Ends>& ends = kv.second;
+    std::vector<size_t> extra;
+    for (const Ends& e : ends) {
+      extra.push_back(e.match);
+      extra.push_back(e.query);
+    }
+    CondensedGraph cg;
+    std::vector<size_t> a;
+    Impl::CondenseOptions options;
+    options.variance_scale = variance_scale;
+    if (!m.condense(kv.first, extra, options, &cg, &a)) {
+      all_ok = false;
+      continue;
+    }
+    // condense() adds the chains of odometry first, then the accepted loops.
+    const size_t chains = cg.edgeCount() - m.loopReps(kv.first, 0, m.cfg.chi2.max_loop_anchors).size();
+    bool any_fixed = false;
+    for (size_t p : a) any_fixed = any_fixed || m.kfs[p].sequence == 0;
+    if (!any_fixed) cg.setFixed(0, true);  // the oldest anchor holds the gauge
+    auto id = [&](size_t p) { return static_cast<int>(std::lower_bound(a.begin(), a.end(), p) - a.begin()); };
+    std::vector<size_t> edge(ends.size(), std::numeric_limits<size_t>::max());
+    for (size_t k = 0; k < ends.size(); ++k) {
+      const LoopCandidate& c = candidates[ends[k].i];
+      CondensedEdge e;
+      e.from = id(ends[k].match);
+      e.to = id(ends[k].query);
+      e.t = c.relative_t;
+      e.yaw = c.relative_yaw;
+      e.covariance = loop_cov;
+      if (cg.addEdge(e)) edge[k] = cg.edgeCount() - 1;
+    }
+    bool ok = false;
+    cg.solve(4 * kStepIterations, kTolerance, &ok);
+    if (!ok) {
+      all_ok = false;
+      continue;
+    }
+    // Graduated non-convexity from the least-squares solution on.
+    double max_r2 = 0.0;
+    for (size_t e : edge)
+      if (e != std::numeric_limits<size_t>::max()) max_r2 = std::max(max_r2, cg.chi2(e));
+    std::vector<double> w(ends.size(), 1.0);
+    if (max_r2 > inlier_chi2) {
+      double mu = inlier_chi2 / std::max(1e-9, 2.0 * max_r2 - inlier_chi2);
+      for (int step = 0; step < kGncMaxSteps && ok; ++step) {
+        bool binary = true;
+        for (size_t k = 0; k < ends.size(); ++k) {
+          if (edge[k] == std::numeric_limits<size_t>::max()) continue;
+          w[k] = tlsWeight(cg.chi2(edge[k]), inlier_chi2, mu);
+          cg.setWeight(edge[k], w[k]);
+          binary = binary && (w[k] < 1e-6 || w[k] > 1.0 - 1e-6);
+        }
+        cg.solve(kStepIterations, kTolerance, &ok);
+        if ((binary && step > 0) || mu > kGncMaxMu) break;
+        mu *= kGncFactor;
+      }
+      if (!ok) {
+        all_ok = false;
+        continue;
+      }
+    }
+    // Where the solution tears the odometry: chains bent beyond tear_chi2 (a row of look-alikes
+    // that agree with each other is absorbed by the odometry, whose loss is not robust).
+    std::vector<bool> torn(chains, false);
+    for (size_t e = 0; e < chains; ++e) torn[e] = !(cg.chi2(e) <= tear_chi2);
+    // Inliers, each against the others (leave one out).
+    for (size_t k = 0; k < ends.size(); ++k) {
+      if (edge[k] == std::numeric_limits<size_t>::max()) continue;
+      GlobalLoop& r = (*out)[ends[k].i];
+      r.chi2 = cg.chi2(edge[k]);
+      r.inlier = w[k] > 0.5 && r.chi2 <= inlier_chi2;
+      if (!r.inlier) continue;
+      // Its cycle: the chains between its ends along one segment; across segments, any chain.
+      const bool one_segment = m.kfs[ends[k].match].segment == m.kfs[ends[k].query].segment;
+      const int gm0 = id(ends[k].match), gq0 = id(ends[k].query);
+      for (size_t e = 0; e < chains && !r.torn; ++e) {
+        if (!torn[e]) continue;
+        const CondensedEdge& ce = cg.edge(e);
+        r.torn = !one_segment || (ce.from >= gm0 && ce.to <= gq0);
+      }
+      if (r.torn || (!test_alone.empty() && !test_alone[ends[k].i])) continue;
+      CondensedGraph without = cg;
+      without.setWeight(edge[k], 0.0);
+      bool solved = false;
+      without.solve(2 * kStepIterations, kTolerance, &solved);
+      if (!solved) continue;
+      const int gm = id(ends[k].match), gq = id(ends[k].query);
+      const Eigen::Vector4d nu = without.residual(edge[k]);  // prediction minus the candidate
+      for (size_t i = 0; i < a.size(); ++i) without.setFixed(static_cast<int>(i), false);
+      const Impl::Keyframe& km = m.kfs[ends[k].match];
+      const Eigen::Matrix3d Rm = yawPitchRollToRotation(without.state(gm).yaw, km.pitch, km.roll);
+      Eigen::Matrix4d C;
+      if (!without.marginal(gm, gq, Rm, &C)) continue;
+      const Eigen::Matrix4d S = C + loop_cov;
+      Eigen::Vector4d nw = nu;
+      nw[3] = wrapAngle(nw[3]);
+      r.d2 = nw.dot(S.ldlt().solve(nw));
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(C.topLeftCorner<3, 3>());
+      r.sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
+      r.pinned = std::isfinite(r.d2) && std::isfinite(r.sigma);
+    }
+  }
+  return all_ok;
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion

@@ -1,0 +1,127 @@
+// Decision revisit's global pass on the verifier's side (global_check; the solve itself:
+// core/global_pass.cpp). What the per-candidate test rejects for contradicting the graph, and
+// the members of revisit hypotheses that were dropped, wait in a pool; every global_period
+// keyframes the pool is judged against every loop at once, and an inlier that the other loops
+// pin down and that the prior of the accepted loops does not rule out is released (kRelease,
+// as a group). A candidate that waited global_window keyframes,
+// or the oldest one when the pool is full, is dropped (kDrop, reason unconfirmed).
+#include "rover_loop_fusion/core/verifier.h"
+
+#include "rover_loop_fusion/core/decision.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+namespace rover_loop_fusion {
+namespace core {
+
+namespace {
+
+bool contradictsTheGraph(Reason reason) {
+  return reason == Reason::kInnovationAboveBound || reason == Reason::kScoreAboveThreshold ||
+         reason == Reason::kInconsistentWithDrift;
+}
+
+}  // namespace
+
+bool Verifier::holdForGlobal(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
+  if (!config_.global.global_check || config_.decision != Decision::kRevisit || !contradictsTheGraph(reason))
+    return false;
+  HeldCandidate h = heldFor(c);
+  h.query_pos = qpos;
+  h.match_pos = mpos;
+  h.kind = HoldKind::kGlobal;
+  if (!addToGlobalPool(h)) return false;
+  *detail += "; held for the global pass (global_check)";
+  return true;
+}
+
+bool Verifier::addToGlobalPool(const HeldCandidate& held) {
+  if (!config_.global.global_check || config_.decision != Decision::kRevisit) return false;
+  if (held.kind != HoldKind::kRevisit && held.kind != HoldKind::kGlobal) return false;
+  if (!graph_.connected(held.query_pos, held.match_pos)) return false;
+  HeldCandidate h = held;
+  h.kind = HoldKind::kGlobal;
+  h.arrived = graph_.keyframeCount();
+  if (global_pool_.size() >= static_cast<size_t>(config_.global.global_max_held)) {
+    const HeldCandidate oldest = global_pool_.front();
+    global_pool_.erase(global_pool_.begin());
+    decide(LoopDecision::Kind::kDrop, oldest.candidate,
+           Verdict::Reject(Reason::kUnconfirmed, oldest.candidate,
+                           "dropped from the global pass's pool: global_max_held=" +
+                               std::to_string(config_.global.global_max_held) + " newer candidates wait"));
+  }
+  global_pool_.push_back(h);
+  return true;
+}
+
+void Verifier::globalPass() {
+  const size_t now = graph_.keyframeCount();
+  last_global_pass_ = now;
+  const double c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
+  const double tear = chiSquareQuantile(config_.global.global_tear_probability, 4);
+  const double prior_gate = chiSquareQuantile(config_.global.global_prior_probability, 4);
+  // Each candidate against the prior alone (the accepted loops, not the pool): a world of
+  // look-alikes that agree with each other (floors of a deck, a shifted stretch) passes every
+  // test among themselves, but not this one. Only those that pass it are tested further alone.
+  std::vector<LoopCandidate> candidates;
+  std::vector<double> prior_d2(global_pool_.size(), std::numeric_limits<double>::infinity());
+  std::vector<bool> eligible(global_pool_.size(), false);
+  for (size_t i = 0; i < global_pool_.size(); ++i) {
+    const HeldCandidate& h = global_pool_[i];
+    candidates.push_back(h.candidate);
+    Eigen::Matrix4d C;
+    if (graph_.connected(h.query_pos, h.match_pos) &&
+        graph_.relativeCovariance(h.match_pos, h.query_pos, rule_->driftScale(), &C)) {
+      const Eigen::Vector4d nu = graph_.innovationVector(h.candidate, h.query_pos, h.match_pos);
+      prior_d2[i] = nu.dot((C + graph_.loopCovariance()).ldlt().solve(nu));
+    }
+    eligible[i] = prior_d2[i] <= prior_gate;
+  }
+  std::vector<GlobalLoop> found;
+  graph_.globalConsistency(candidates, c2, tear, rule_->driftScale(), eligible, &found);
+  HeldGroup released;
+  std::vector<HeldCandidate> waiting;
+  for (size_t i = 0; i < global_pool_.size(); ++i) {
+    const HeldCandidate& h = global_pool_[i];
+    const GlobalLoop& r = found[i];
+    const bool releasable = eligible[i] && r.inlier && r.pinned && r.d2 <= c2 &&
+                        (config_.global.global_max_sigma <= 0 || r.sigma <= config_.global.global_max_sigma);
+    if (releasable) {
+      released.push_back(h);
+    } else if (now >= h.arrived + static_cast<size_t>(config_.global.global_window) ||
+               !graph_.connected(h.query_pos, h.match_pos)) {
+      std::ostringstream s;
+      s.precision(3);
+      s << std::fixed << "not released by the global pass within global_window=" << config_.global.global_window
+        << " keyframes (last pass: ";
+      if (!eligible[i])
+        s << "ruled out by the prior of the accepted loops alone: d2 " << prior_d2[i] << " > " << prior_gate;
+      else if (!std::isfinite(r.chi2))
+        s << "not solved";
+      else if (!r.inlier)
+        s << "an outlier of the robust solve, residual chi2 " << r.chi2 << " (inliers <= " << c2 << ")";
+      else if (r.torn)
+        s << "an inlier of a solution that bends the odometry between its ends beyond chi2 " << tear;
+      else if (!r.pinned)
+        s << "an inlier, but the graph without it could not be solved";
+      else
+        s << "an inlier; without it the others predict it at d2 " << r.d2 << " (gate " << c2 << "), std " << r.sigma
+          << " m (global_max_sigma " << config_.global.global_max_sigma << " m)";
+      s << ")";
+      decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, s.str()));
+    } else {
+      waiting.push_back(h);
+    }
+  }
+  global_pool_.swap(waiting);
+  if (released.empty()) return;
+  std::sort(released.begin(), released.end(),
+            [](const HeldCandidate& a, const HeldCandidate& b) { return a.query_pos < b.query_pos; });
+  release(released);
+}
+
+}  // namespace core
+}  // namespace rover_loop_fusion
