@@ -87,6 +87,10 @@ class DemoLaunch(unittest.TestCase):
                          "verifier_config:=" + os.path.join(ROOT, "config", "rover_outdoor.yaml"))
         self.assertEqual(params["/b/verifier_type"], "accept_all")
         self.assertEqual(params["/b/rover/threshold"], 1.0)
+        # The global pass: the YAML's (off) unless the arg overrides it.
+        self.assertIs(params["/b/rover/global_check"], False)
+        params, _ = load("verifier.launch", "global_check:=true")
+        self.assertIs(params["/rover_verifier/rover/global_check"], True)
 
 
 if __name__ == "__main__":
