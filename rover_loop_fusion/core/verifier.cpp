@@ -222,7 +222,9 @@ void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind k
   h.kind = kind;
   h.d2 = d2;
   held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
-  settle();
+  // A revisit hypothesis is judged on keyframe arrival (addKeyframe), not here: its joint trial
+  // (all its loops) would otherwise land on this verify()'s time (issue 20).
+  if (kind != HoldKind::kRevisit) settle();
 }
 
 void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict) {
