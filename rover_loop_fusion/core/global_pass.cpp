@@ -152,11 +152,11 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
       if (!r.inlier) continue;
       // Its cycle: the chains between its ends along one segment; across segments, any chain.
       const bool one_segment = m.kfs[ends[k].match].segment == m.kfs[ends[k].query].segment;
-      const int gm0 = id(ends[k].match), gq0 = id(ends[k].query);
+      const int gm = id(ends[k].match), gq = id(ends[k].query);
       for (size_t e = 0; e < chains && !r.torn; ++e) {
         if (!torn[e]) continue;
         const CondensedEdge& ce = cg.edge(e);
-        r.torn = !one_segment || (ce.from >= gm0 && ce.to <= gq0);
+        r.torn = !one_segment || (ce.from >= gm && ce.to <= gq);
       }
       if (r.torn || (!test_alone.empty() && !test_alone[ends[k].i])) continue;
       CondensedGraph without = cg;
@@ -164,17 +164,13 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
       bool solved = false;
       without.solve(2 * kStepIterations, kTolerance, &solved);
       if (!solved) continue;
-      const int gm = id(ends[k].match), gq = id(ends[k].query);
-      const Eigen::Vector4d nu = without.residual(edge[k]);  // prediction minus the candidate
+      const Eigen::Vector4d nu = without.residual(edge[k]);  // prediction minus the candidate (yaw wrapped)
       for (size_t i = 0; i < a.size(); ++i) without.setFixed(static_cast<int>(i), false);
       const Impl::Keyframe& km = m.kfs[ends[k].match];
       const Eigen::Matrix3d Rm = yawPitchRollToRotation(without.state(gm).yaw, km.pitch, km.roll);
       Eigen::Matrix4d C;
       if (!without.marginal(gm, gq, Rm, &C)) continue;
-      const Eigen::Matrix4d S = C + loop_cov;
-      Eigen::Vector4d nw = nu;
-      nw[3] = wrapAngle(nw[3]);
-      r.d2 = nw.dot(S.ldlt().solve(nw));
+      r.d2 = nu.dot((C + loop_cov).ldlt().solve(nu));
       Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(C.topLeftCorner<3, 3>());
       r.sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
       r.pinned = std::isfinite(r.d2) && std::isfinite(r.sigma);
