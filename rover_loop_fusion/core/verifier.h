@@ -16,7 +16,8 @@
 //   verdict = verify(c)
 //     accepted  -> use the loop, then commit(c)                    (as always)
 //     deferred  -> do not use the loop yet (reason kDeferred)       (confirm_without_prior,
-//                                                                    hold_sigma)
+//                                                                    hold_sigma, decision
+//                                                                    revisit, global_check)
 //     otherwise -> rejected
 //   after every addKeyframe() and verify(): for (d : takeDecisions())
 //     kRelease  -> the held candidate d.candidate is accepted now and ALREADY COMMITTED by the
