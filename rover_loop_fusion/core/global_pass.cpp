@@ -170,7 +170,7 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
       const Eigen::Matrix3d Rm = yawPitchRollToRotation(without.state(gm).yaw, km.pitch, km.roll);
       Eigen::Matrix4d C;
       if (!without.marginal(gm, gq, Rm, &C)) continue;
-      r.d2 = nu.dot((C + loop_cov).ldlt().solve(nu));
+      r.d2 = mahalanobis(nu, C + loop_cov);
       Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(C.topLeftCorner<3, 3>());
       r.sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
       r.pinned = std::isfinite(r.d2) && std::isfinite(r.sigma);

@@ -76,7 +76,7 @@ void Verifier::globalPass() {
     if (graph_.connected(h.query_pos, h.match_pos) &&
         graph_.relativeCovariance(h.match_pos, h.query_pos, rule_->driftScale(), &C)) {
       const Eigen::Vector4d nu = graph_.innovationVector(h.candidate, h.query_pos, h.match_pos);
-      prior_d2[i] = nu.dot((C + graph_.loopCovariance()).ldlt().solve(nu));
+      prior_d2[i] = mahalanobis(nu, C + graph_.loopCovariance());
     }
     eligible[i] = prior_d2[i] <= prior_gate;
   }
