@@ -82,14 +82,48 @@ void Verifier::globalPass() {
   }
   std::vector<GlobalLoop> found;
   graph_.globalConsistency(candidates, c2, tear, rule_->driftScale(), eligible, &found);
+  auto passes = [&](const GlobalLoop& r, size_t i) {
+    return eligible[i] && r.inlier && !r.torn && r.pinned && r.d2 <= c2 &&
+           (config_.global.global_max_sigma <= 0 || r.sigma <= config_.global.global_max_sigma);
+  };
+  std::vector<bool> releasable(global_pool_.size());
+  bool any = false;
+  for (size_t i = 0; i < global_pool_.size(); ++i) any = (releasable[i] = passes(found[i], i)) || any;
+  // Competition: solved again without the releasable ones, a rival of one of them is a pooled
+  // candidate of the same revisit (queries within revisit_stretch) that the first solve
+  // rejected and that now passes every test. A revisit that two incompatible sets of
+  // candidates explain equally well is ambiguous: neither is released.
+  std::vector<long> rival(global_pool_.size(), -1);
+  if (any && config_.global.global_compete) {
+    std::vector<LoopCandidate> rest;
+    std::vector<bool> rest_eligible;
+    std::vector<size_t> rest_index;
+    for (size_t i = 0; i < global_pool_.size(); ++i) {
+      if (releasable[i]) continue;
+      rest.push_back(candidates[i]);
+      rest_eligible.push_back(eligible[i]);
+      rest_index.push_back(i);
+    }
+    std::vector<GlobalLoop> alt;
+    graph_.globalConsistency(rest, c2, tear, rule_->driftScale(), rest_eligible, &alt);
+    const size_t stretch = static_cast<size_t>(std::max(0, config_.revisit.revisit_stretch));
+    for (size_t k = 0; k < rest.size(); ++k) {
+      const size_t j = rest_index[k];
+      if (found[j].inlier || !passes(alt[k], j)) continue;
+      for (size_t i = 0; i < global_pool_.size(); ++i) {
+        if (!releasable[i]) continue;
+        const size_t qi = global_pool_[i].query_pos, qj = global_pool_[j].query_pos;
+        if ((qi > qj ? qi - qj : qj - qi) <= stretch) rival[i] = static_cast<long>(j);
+      }
+    }
+    for (size_t i = 0; i < global_pool_.size(); ++i) releasable[i] = releasable[i] && rival[i] < 0;
+  }
   HeldGroup released;
   std::vector<HeldCandidate> waiting;
   for (size_t i = 0; i < global_pool_.size(); ++i) {
     const HeldCandidate& h = global_pool_[i];
     const GlobalLoop& r = found[i];
-    const bool releasable = eligible[i] && r.inlier && r.pinned && r.d2 <= c2 &&
-                        (config_.global.global_max_sigma <= 0 || r.sigma <= config_.global.global_max_sigma);
-    if (releasable) {
+    if (releasable[i]) {
       released.push_back(h);
     } else if (now >= h.arrived + static_cast<size_t>(config_.global.global_window) ||
                !graph_.connected(h.query_pos, h.match_pos)) {
@@ -97,7 +131,11 @@ void Verifier::globalPass() {
       s.precision(3);
       s << std::fixed << "not released by the global pass within global_window=" << config_.global.global_window
         << " keyframes (last pass: ";
-      if (!eligible[i])
+      if (rival[i] >= 0)
+        s << "ambiguous: without it and the others that pass, the rival loop "
+          << global_pool_[rival[i]].candidate.query_index << "->" << global_pool_[rival[i]].candidate.match_index
+          << " of the same revisit passes every test instead (global_compete)";
+      else if (!eligible[i])
         s << "ruled out by the prior of the accepted loops alone: d2 " << prior_d2[i] << " > " << prior_gate;
       else if (!std::isfinite(r.chi2))
         s << "not solved";

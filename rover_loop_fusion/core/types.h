@@ -427,6 +427,12 @@ struct GlobalConfig {
   /// A pooled inlier is released only if the other loops predict its relative pose this well:
   /// the leave-one-out relative position's largest std [m] (0: no bound).
   double global_max_sigma = 1.0;
+  /// Competition: before a release, the pass is solved again without the candidates it would
+  /// release; if a candidate of the same revisit (queries within revisit_stretch) that the
+  /// first solve rejected now passes every test, the revisit is ambiguous and nothing of it is
+  /// released (two incompatible sets of loops explain it: a row of look-alikes beside the true
+  /// one). false: release what the first solve finds.
+  bool global_compete = true;
 };
 
 /// The verifier's parameters, nested by concern. Every field is named by its key (YAML, ROS

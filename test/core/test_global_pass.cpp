@@ -1,8 +1,9 @@
 // decision revisit's global pass (global_check; core/global_pass.cpp, core/global_release.cpp):
 // revisits that yield a single candidate after long drift fail the per-candidate test and never
 // make a revisit hypothesis; judged against every loop at once, the true ones are released and
-// the look-alikes stay out. The pool is bounded (global_max_held) and a candidate waits at
-// most global_window keyframes.
+// the look-alikes stay out; a revisit that a rival row explains as well is not released
+// (global_compete). The pool is bounded (global_max_held) and a candidate waits at most
+// global_window keyframes.
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -175,4 +176,52 @@ TEST(GlobalPass, OffByDefaultAndOnlyUnderDecisionRevisit) {
   metric.decision = core::Decision::kMetric;
   const Outcome r = run(metric, s);
   EXPECT_EQ(r.deferred, 0) << "decision metric holds nothing for the global pass";
+}
+
+TEST(GlobalPass, ARevisitThatARivalRowExplainsAsWellIsNotReleased) {
+  // Beside every true candidate a rival for the same query, its match one keyframe (0.5 m)
+  // along the track with the true relative pose: two rows of one revisit, each consistent with
+  // itself and with the odometry, closer than the prior can tell apart.
+  sim::Scene s = sparseRevisits();
+  std::vector<sim::SimCandidate> both;
+  for (const sim::SimCandidate& c : s.candidates) {
+    if (!c.is_true) continue;
+    both.push_back(c);
+    sim::SimCandidate r = c;
+    r.candidate.match_index += 1;
+    r.is_true = false;
+    both.push_back(r);
+  }
+  s.candidates = both;
+  core::VerifierConfig cfg = config(true);
+  cfg.global.global_window = 200;  // the ambiguous ones are dropped within the run, saying why
+  core::VerifierConfig off = cfg;
+  off.global.global_compete = false;
+  const Outcome first = run(off, s);
+  const Outcome r = run(cfg, s);
+  auto falseReleases = [&](const Outcome& o) {
+    int n = 0;
+    for (const LoopDecision& d : o.decisions)
+      if (d.kind == LoopDecision::Kind::kRelease) {
+        for (const sim::SimCandidate& c : s.candidates)
+          if (!c.is_true && c.candidate.query_index == d.candidate.query_index &&
+              c.candidate.match_index == d.candidate.match_index)
+            ++n;
+      }
+    return n;
+  };
+  ASSERT_GE(first.released, 2) << "without competition the pass releases one of the rows";
+  // With it, a revisit whose rival row passes every test once it is gone is held, then dropped
+  // saying so, and fewer look-alikes get in (the ones that do come through the per-candidate
+  // test after a release).
+  EXPECT_LT(r.released, first.released);
+  EXPECT_LT(r.false_accepted, first.false_accepted);
+  EXPECT_EQ(falseReleases(r), 0);
+  int ambiguous = 0;
+  for (const LoopDecision& d : r.decisions)
+    if (d.kind == LoopDecision::Kind::kDrop && d.verdict.detail.find("ambiguous") != std::string::npos &&
+        d.verdict.detail.find("rival loop") != std::string::npos)
+      ++ambiguous;
+  EXPECT_GE(ambiguous, 2) << "a dropped candidate names the rival that made its revisit ambiguous";
+  EXPECT_EQ(r.released + r.dropped + static_cast<int>(r.held_at_end), r.deferred);
 }
