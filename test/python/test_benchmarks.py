@@ -184,3 +184,48 @@ def test_agreement_quick(tmp_path):
         assert float(same["agree_pct"]) >= 99.0, same
         assert int(same["scored"]) > 0 and float(same["dscore_median"]) < 0.05, same
     assert (tmp_path / "disagreements.csv").exists() and (tmp_path / "summary.md").exists()
+
+
+def test_robustness_quick(tmp_path):
+    """bench.sh robustness (issue 19's +-10 % target): every case runs at every setting with the
+    setting's parameter scaled from the case's YAML, the counts from the verdicts match
+    rover_replay's own, and summary.md pools them per family."""
+    robustness = script("bench/robustness.py")
+    out = tmp_path / "rob"
+    assert robustness.main(["--quick", "--families", "poc", "--settings", "base,thr1.1,gate0.9",
+                            "--set", "revoke_group=0", "--out", str(out), "--jobs", "1"]) == 0
+    rows = _rows(out / "results.csv")
+    cases = {r["case"] for r in rows}
+    assert cases and len(rows) == 3 * len(cases)
+    for case in cases:
+        by = {r["setting"]: r for r in rows if r["case"] == case}
+        base = by["base"]
+        assert float(by["thr1.1"]["threshold"]) == pytest.approx(1.1 * float(base["threshold"]))
+        assert by["thr1.1"]["max_innovation"] == base["max_innovation"]
+        assert float(by["gate0.9"]["max_innovation"]) == pytest.approx(0.9 * float(base["max_innovation"]))
+        assert float(by["gate0.9"]["max_innovation_per_metre"]) == pytest.approx(
+            0.9 * float(base["max_innovation_per_metre"]))
+        for r in by.values():
+            assert r["counts_agree"] == "1", r
+            assert int(r["tp"]) + int(r["fn"]) > 0
+        command = (out / "runs" / "poc" / case / "thr1.1" / "command.txt").read_text()
+        assert "--threshold" in command and "--revoke_group 0" in command
+    text = (out / "summary.md").read_text()
+    tp, fp, fn = (sum(int(r[k]) for r in rows if r["setting"] == "base") for k in ("tp", "fp", "fn"))
+    assert f"| poc | {len(cases)} | {tp}/{fp}/{fn} P " in text
+
+
+def test_robustness_settings_scale_the_yaml_or_the_case_flag(tmp_path):
+    robustness = script("bench/robustness.py")
+    cfg = tmp_path / "v.yaml"
+    cfg.write_text("threshold: 0.2\nmax_innovation: 0.5\nmax_innovation_per_metre: 0.02\n")
+    flags = ["--config", str(cfg), "--threshold", "0.3"]
+    extra, values = robustness.setting_flags(flags, "thr0.9")
+    assert extra == ["--threshold", "0.27"] and values["threshold"] == pytest.approx(0.27)
+    extra, values = robustness.setting_flags(flags, "gate1.1")
+    assert extra == ["--max_innovation", "0.55", "--max_innovation_per_metre", "0.022"]
+    assert values["threshold"] == pytest.approx(0.3)
+    assert robustness.setting_flags(flags, "base")[0] == []
+    cfg.write_text("threshold: 0.2\n")
+    with pytest.raises(ValueError):
+        robustness.setting_flags(["--config", str(cfg)], "gate0.9")
