@@ -4,6 +4,8 @@
 // the look-alikes stay out; a revisit that a rival row explains as well is not released
 // (global_compete). The pool is bounded (global_max_held) and a candidate waits at most
 // global_window keyframes.
+#include "host_run.h"
+
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -47,55 +49,19 @@ core::VerifierConfig config(bool global) {
   return c;
 }
 
-struct Outcome {
-  int true_accepted = 0, false_accepted = 0, true_total = 0, false_total = 0;
-  int deferred = 0, released = 0, dropped = 0;
-  std::vector<LoopDecision> decisions;
-  size_t held_at_end = 0;
-};
+using Outcome = test_support::HostRun;
 
-/// The sequential protocol of a host (every keyframe, then its candidates; accepted ones
-/// committed; later decisions collected); each candidate's final decision counted once.
+/// Every candidate of the scene through a host (host_run.h).
 Outcome run(const core::VerifierConfig& cfg, const sim::Scene& s) {
-  Verifier v(cfg);
-  EXPECT_TRUE(v.configError().empty()) << v.configError();
   std::set<std::pair<int64_t, int64_t>> lookalikes;
-  for (const sim::SimCandidate& c : s.candidates)
+  std::vector<core::LoopCandidate> all;
+  for (const sim::SimCandidate& c : s.candidates) {
+    all.push_back(c.candidate);
     if (!c.is_true) lookalikes.insert({c.candidate.query_index, c.candidate.match_index});
-  auto isFalse = [&](const core::LoopCandidate& c) { return lookalikes.count({c.query_index, c.match_index}) > 0; };
-  Outcome r;
-  std::set<std::pair<int64_t, int64_t>> decided;  // each held candidate decided once
-  auto collect = [&]() {
-    for (const LoopDecision& d : v.takeDecisions()) {
-      EXPECT_TRUE(decided.insert({d.candidate.query_index, d.candidate.match_index}).second)
-          << "decided twice: " << d.candidate.query_index << "->" << d.candidate.match_index;
-      if (d.kind == LoopDecision::Kind::kRelease) {
-        ++r.released;
-        ++(isFalse(d.candidate) ? r.false_accepted : r.true_accepted);
-      } else if (d.kind == LoopDecision::Kind::kDrop) {
-        ++r.dropped;
-      }
-      r.decisions.push_back(d);
-    }
-  };
-  size_t next = 0;
-  for (const sim::SimKeyframe& kf : s.keyframes) {
-    EXPECT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
-    collect();
-    for (; next < s.candidates.size() && s.candidates[next].candidate.query_index == kf.index; ++next) {
-      const core::LoopCandidate& c = s.candidates[next].candidate;
-      ++(isFalse(c) ? r.false_total : r.true_total);
-      const Verdict vd = v.verify(c);
-      if (vd.accepted) {
-        EXPECT_TRUE(v.commit(c).ok);
-        ++(isFalse(c) ? r.false_accepted : r.true_accepted);
-      }
-      if (vd.deferred) ++r.deferred;
-      collect();
-    }
   }
-  r.held_at_end = v.heldCount();
-  return r;
+  return test_support::runAsHost(cfg, s, all, [&](const core::LoopCandidate& c) {
+    return lookalikes.count({c.query_index, c.match_index}) > 0;
+  });
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 // of a revisit fail the metric test alone; held together as a hypothesis they are released as
 // a group. A row of look-alikes that contradicts accepted loops, or that fits the prior worse
 // than a rival hypothesis of the same revisit, stays out.
+#include "host_run.h"
+
 #include "rover_loop_fusion/core/verifier.h"
 #include "rover_loop_fusion/sim/scene.h"
 
@@ -41,13 +43,7 @@ core::VerifierConfig config(core::Decision decision) {
   return c;
 }
 
-struct Outcome {
-  int true_accepted = 0, false_accepted = 0, true_rejected = 0, false_rejected = 0;
-  int released = 0, dropped = 0;
-  std::vector<LoopDecision> decisions;
-  std::vector<Verdict> verdicts;
-  double ate = 0.0;
-};
+using Outcome = test_support::HostRun;
 
 bool isFalse(const core::LoopCandidate& c, const std::vector<core::LoopCandidate>& lookalikes) {
   return std::any_of(lookalikes.begin(), lookalikes.end(), [&](const core::LoopCandidate& l) {
@@ -55,57 +51,14 @@ bool isFalse(const core::LoopCandidate& c, const std::vector<core::LoopCandidate
   });
 }
 
-/// The sequential protocol of a host: every keyframe, then its candidates (the scene's true
-/// ones and `lookalikes`, by query); accepted ones committed; later decisions collected.
+/// The scene's true candidates and `lookalikes` through a host (host_run.h).
 Outcome run(const core::VerifierConfig& cfg, const sim::Scene& s, const std::vector<core::LoopCandidate>& lookalikes = {},
         Verifier* out = nullptr) {
-  Verifier local(cfg);
-  Verifier& v = out ? *out : local;
-  EXPECT_TRUE(v.configError().empty()) << v.configError();
   std::vector<core::LoopCandidate> all;
   for (const sim::SimCandidate& c : s.candidates)
     if (c.is_true) all.push_back(c.candidate);
   all.insert(all.end(), lookalikes.begin(), lookalikes.end());
-  std::stable_sort(all.begin(), all.end(), [](const core::LoopCandidate& a, const core::LoopCandidate& b) {
-    return a.query_index < b.query_index;
-  });
-  Outcome r;
-  auto collect = [&]() {
-    for (const LoopDecision& d : v.takeDecisions()) {
-      const bool f = isFalse(d.candidate, lookalikes);
-      if (d.kind == LoopDecision::Kind::kRelease) {
-        ++r.released;
-        ++(f ? r.false_accepted : r.true_accepted);
-      } else if (d.kind == LoopDecision::Kind::kDrop) {
-        ++r.dropped;
-        ++(f ? r.false_rejected : r.true_rejected);
-      }
-      r.decisions.push_back(d);
-    }
-  };
-  size_t next = 0;
-  for (const sim::SimKeyframe& kf : s.keyframes) {
-    EXPECT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
-    collect();
-    for (; next < all.size() && all[next].query_index == kf.index; ++next) {
-      const core::LoopCandidate& c = all[next];
-      const Verdict vd = v.verify(c);
-      r.verdicts.push_back(vd);
-      const bool f = isFalse(c, lookalikes);
-      if (vd.accepted) {
-        EXPECT_TRUE(v.commit(c).ok);
-        ++(f ? r.false_accepted : r.true_accepted);
-      } else if (!vd.deferred) {
-        ++(f ? r.false_rejected : r.true_rejected);
-      }
-      collect();
-    }
-  }
-  std::vector<core::Pose> est, truth;
-  for (const core::TrajectoryPoint& p : v.trajectory()) est.push_back(p.estimate);
-  for (size_t i = 0; i < est.size(); ++i) truth.push_back(s.keyframes[i].truth);
-  r.ate = sim::ate(est, truth);
-  return r;
+  return test_support::runAsHost(cfg, s, all, [&](const core::LoopCandidate& c) { return isFalse(c, lookalikes); }, out);
 }
 
 /// A row of look-alikes at the first true candidates of lap 2, each one keyframe before its
