@@ -38,7 +38,7 @@ import yaml
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the family scripts beside this one
 sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # roverlib
-from roverlib import bench, methods, splits  # noqa: E402
+from roverlib import bench, methods, metrics, splits  # noqa: E402
 
 SETTINGS = {  # name -> {parameter: factor}
     "base": {},
@@ -91,26 +91,13 @@ def setting_flags(flags, setting):
 
 
 def counts(verdicts_path, labels_path):
-    """TP/FP/TN/FN of a run's final verdicts against the scenario's labels (candidates of one
-    (query, match) pair take their labels in order, as roverlib.metrics.join; label -1 left out)."""
-    pending = {}
-    with open(labels_path, newline="") as f:
-        for r in csv.DictReader(f):
-            pending.setdefault((int(r["query_index"]), int(r["match_index"])), []).append(int(r["label"]))
-    c = {"tp": 0, "fp": 0, "tn": 0, "fn": 0}
-    with open(verdicts_path, newline="") as f:
-        for r in csv.DictReader(f):
-            if r.get("final", "1") != "1":  # a held candidate's deferred row: its final one follows
-                continue
-            key = (int(r["query_index"]), int(r["match_index"]))
-            if not pending.get(key):
-                continue
-            label = pending[key].pop(0)
-            if label not in (0, 1):
-                continue
-            accepted = int(r["accepted"]) == 1
-            c[("tp" if label else "fp") if accepted else ("fn" if label else "tn")] += 1
-    return c
+    """TP/FP/TN/FN of a run's final verdicts against the scenario's labels (metrics.join: the
+    candidates of one (query, match) pair take their labels in order; label -1 left out)."""
+    rows = [r for r in metrics.read_verdicts(verdicts_path) if r.get("final", "1") == "1"]
+    j = metrics.join(rows, metrics.read_labels(labels_path))
+    true, accepted = j["label"] == 1, j["accepted"]
+    return {"tp": int((true & accepted).sum()), "fp": int((~true & accepted).sum()),
+            "tn": int((~true & ~accepted).sum()), "fn": int((true & ~accepted).sum())}
 
 
 def ratio(a, b):
