@@ -19,6 +19,7 @@
 #include <mutex>
 #include <map>
 #include <set>
+#include <string>
 #include <unordered_map>
 #include <utility>
 
@@ -267,13 +268,26 @@ void LoopFusionAdapter::finish() {
     m.held.clear();
     m.failure = "loop_fusion ended (LoopFusionAdapter::finish)";
     m.mode = Impl::Mode::kFinished;
+    // After ros::shutdown() (loop_fusion's 's' command, Ctrl-C) rosconsole prints nothing: say
+    // it on stderr then, as the abort that follows flushes nothing.
+    auto tell = [](bool error, const std::string& text) {
+      if (ros::ok()) {
+        if (error)
+          ROS_ERROR("%s", text.c_str());
+        else
+          ROS_INFO("%s", text.c_str());
+        return;
+      }
+      std::fprintf(stderr, "[%s] %s\n", error ? "ERROR" : " INFO", text.c_str());
+      std::fflush(stderr);
+    };
     if (held > 0)
-      ROS_INFO("[rover] loop_fusion ends: %zu candidates still held got their final verdict (unconfirmed, drop)",
-               held);
+      tell(false, "[rover] loop_fusion ends: " + std::to_string(held) +
+                      " candidates still held got their final verdict (unconfirmed, drop)");
     // loop_fusion ends by std::terminate: the writer thread must have the rows before abort().
     const size_t unwritten = m.host->flushLog(2.0);
     if (unwritten > 0)
-      ROS_ERROR("[rover] loop_fusion ends: %zu verdict rows not written to the log yet", unwritten);
+      tell(true, "[rover] loop_fusion ends: " + std::to_string(unwritten) + " verdict rows not written to the log yet");
   });
 }
 

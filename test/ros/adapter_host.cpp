@@ -5,7 +5,8 @@
 // cannot start must stop the process inside initialize().
 //
 // With --end-like-loop-fusion: a verifier that holds every candidate, and the end of upstream
-// loop_fusion's main: it returns while a thread is still joinable (std::terminate, abort).
+// loop_fusion's main: ros::shutdown(), then it returns while a thread is still joinable
+// (std::terminate, abort).
 #include "rover_loop_fusion/ros/loop_fusion_adapter.h"
 #include "rover_loop_fusion/ros/loop_verifier.h"
 
@@ -63,6 +64,7 @@ int main(int argc, char** argv) {
   std::thread process([] {  // loop_fusion's process(): runs until the process ends
     for (;;) std::this_thread::sleep_for(std::chrono::seconds(1));
   });
+  ros::shutdown();  // loop_fusion's command() on 's' (and roscpp on Ctrl-C) before main returns
   std::printf("host: returning from main with a joinable thread\n");
   std::fflush(stdout);
   return 0;  // ~thread of a joinable thread: std::terminate, as loop_fusion's main after 's' or Ctrl-C

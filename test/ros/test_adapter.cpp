@@ -1318,6 +1318,9 @@ TEST(AdapterStop, ALoopFusionThatEndsByTerminateStillLogsTheFinalVerdictOfAHeldC
   ros::param::del("/terminating_host/verdict_log");
   EXPECT_TRUE(contains(r.output, "host: returning from main with a joinable thread")) << r.output;
   EXPECT_NE(r.exit_code, 0) << "the host must end as loop_fusion does (abort)\n" << r.output;
+  // What the user sees in loop_fusion's log, redirected to a file or a pipe (buffered): abort()
+  // flushes nothing, so the adapter does.
+  EXPECT_TRUE(contains(r.output, "loop_fusion ends: 1 candidates still held got their final verdict")) << r.output;
   const std::vector<std::string> rows = readLines(log);
   ASSERT_EQ(rows.size(), 3u) << r.output;
   EXPECT_TRUE(contains(rows[1], ",deferred,") && contains(rows[1], ",0,verify")) << rows[1];
