@@ -2,8 +2,9 @@
 // core/global_pass.cpp). What the per-candidate test rejects for contradicting the graph, and
 // the members of revisit hypotheses that were dropped, wait in a pool; every global_period
 // keyframes the pool is judged against every loop at once, and an inlier that the other loops
-// pin down and that the prior of the accepted loops does not rule out is released (kRelease,
-// as a group). A candidate that waited global_window keyframes,
+// pin down, that the prior of the accepted loops does not rule out and that no rival of its
+// revisit could replace (global_compete) is released (kRelease, as a group). A candidate that
+// waited global_window keyframes,
 // or the oldest one when the pool is full, is dropped (kDrop, reason unconfirmed).
 #include "rover_loop_fusion/core/verifier.h"
 

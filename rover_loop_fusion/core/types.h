@@ -404,9 +404,9 @@ struct GlobalConfig {
   /// non-convexity solve with a truncated quadratic loss over the condensed graph (accepted
   /// loops + the pool) finds the pool's inliers. An inlier is released if the solution does not
   /// tear the odometry of its cycle (global_tear_probability), the other loops predict it
-  /// (leave one out: within global_inlier_probability, std <= global_max_sigma) and its
+  /// (leave one out: within global_inlier_probability, std <= global_max_sigma), its
   /// innovation against the prior of the accepted loops alone lies within
-  /// global_prior_probability.
+  /// global_prior_probability, and no rival of its revisit passes without it (global_compete).
   bool global_check = false;
   /// Keyframes between two passes (while candidates are held).
   int global_period = 25;

@@ -278,6 +278,7 @@ void LoopFusionAdapter::finish() {
           ROS_INFO("%s", text.c_str());
         return;
       }
+      std::fflush(stdout);  // what loop_fusion printed before comes first
       std::fprintf(stderr, "[%s] %s\n", error ? "ERROR" : " INFO", text.c_str());
       std::fflush(stderr);
     };

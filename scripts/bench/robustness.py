@@ -20,11 +20,13 @@ Writes OUT/results.csv (a row per case and setting: TP/FP/TN/FN from the verdict
 the scenario's labels, checked against rover_replay's own line), OUT/summary.md (TP/FP/FN per
 family and setting; recall per case over the settings, its spread = max - min, the cases above
 --spread listed) and OUT/meta.json. An interrupted run goes on where it stopped (a finished run
-has its done.json; a new commit or other flags: use another --out). The real family and the
-pose graphs read ../shared/data.
+has its done.json) if the rover_replay binary, the YAMLs of config/, the split and --set are
+the same; otherwise it starts over. The real family and the pose graphs read ../shared/data.
 """
 import argparse
 import csv
+import glob
+import hashlib
 import json
 import os
 import re
@@ -204,6 +206,30 @@ def scenarios(a):
     return entries
 
 
+def resume_or_start_over(a):
+    """Finished runs are kept only for the same binary, YAMLs, split and --set: else
+    OUT/runs is emptied (a rebuilt rover_replay or an edited YAML starts over)."""
+    digest = hashlib.sha256()
+    for path in [a.replay] + sorted(glob.glob(os.path.join(bench.ROOT, "config", "*.yaml"))):
+        with open(path, "rb") as f:
+            digest.update(f.read())
+    key = {"inputs_sha256": digest.hexdigest(), "split": a.split, "set": a.set_flags}
+    runs = os.path.join(a.out, "runs")
+    path = os.path.join(runs, "key.json")
+    if os.path.isdir(runs):
+        try:
+            with open(path) as f:
+                same = json.load(f) == key
+        except (OSError, ValueError):
+            same = False
+        if not same:
+            print(f"{runs}: runs of another build, YAML or --set: starting over", flush=True)
+            shutil.rmtree(runs)
+    os.makedirs(runs, exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(key, f)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--split", default="test", choices=splits.SPLITS)
@@ -234,6 +260,7 @@ def main(argv=None):
         a.set_flags += [f"--{key}", value]
     a.replay = bench.tool("rover_replay")
     os.makedirs(a.out, exist_ok=True)
+    resume_or_start_over(a)
     entries = scenarios(a)
     if not entries:
         ap.error("no case selected")

@@ -229,3 +229,21 @@ def test_robustness_settings_scale_the_yaml_or_the_case_flag(tmp_path):
     cfg.write_text("threshold: 0.2\n")
     with pytest.raises(ValueError):
         robustness.setting_flags(["--config", str(cfg)], "gate0.9")
+
+
+def test_robustness_starts_over_for_another_build_or_set(tmp_path):
+    """Finished runs are reused only for the same binary, YAMLs, split and --set."""
+    import json
+    robustness = script("bench/robustness.py")
+    out = tmp_path / "rob"
+    args = ["--quick", "--families", "poc", "--settings", "base", "--out", str(out), "--jobs", "1"]
+    assert robustness.main(args) == 0
+    done = next((out / "runs" / "poc").glob("*/base/done.json"))
+    row = json.loads(done.read_text())
+    real_tp = row["tp"]
+    row["tp"] = 9999  # what a finished run of the same inputs would be read back as
+    done.write_text(json.dumps(row))
+    robustness.main(args)  # the same inputs: resumed, the finished run is not redone
+    assert json.loads(done.read_text())["tp"] == 9999
+    assert robustness.main(args + ["--set", "revoke_group=0"]) == 0  # other --set: starts over
+    assert json.loads(done.read_text())["tp"] == real_tp
