@@ -55,12 +55,21 @@ bool Verifier::addToGlobalPool(const HeldCandidate& held) {
                                std::to_string(config_.global.global_max_held) + " newer candidates wait"));
   }
   global_pool_.push_back(h);
+  ++global_pool_revision_;
   return true;
 }
 
 void Verifier::globalPass() {
   const size_t now = graph_.keyframeCount();
   last_global_pass_ = now;
+  // Nothing it depends on changed since the last pass (keyframes after the newest anchor do
+  // not enter the condensed graph): that pass's outcome stands, unless a window ends.
+  const GlobalInputs inputs{graph_.revision(), global_pool_revision_, rule_->driftScale()};
+  bool window_ends = false;
+  for (const HeldCandidate& h : global_pool_)
+    window_ends = window_ends || now >= h.arrived + static_cast<size_t>(config_.global.global_window);
+  if (inputs == last_global_inputs_ && !window_ends) return;
+  last_global_inputs_ = inputs;
   const double c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
   const double tear = chiSquareQuantile(config_.global.global_tear_probability, 4);
   const double prior_gate = chiSquareQuantile(config_.global.global_prior_probability, 4);
@@ -155,6 +164,7 @@ void Verifier::globalPass() {
       waiting.push_back(h);
     }
   }
+  if (waiting.size() != global_pool_.size()) ++global_pool_revision_;
   global_pool_.swap(waiting);
   if (released.empty()) return;
   std::sort(released.begin(), released.end(),

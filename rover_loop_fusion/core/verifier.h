@@ -47,6 +47,7 @@
 #include <Eigen/Geometry>
 
 #include <chrono>
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -173,6 +174,18 @@ class Verifier {
   HeldCandidates held_;
   std::vector<HeldCandidate> global_pool_;  ///< global_check: oldest first
   size_t last_global_pass_ = 0;             ///< keyframes at the last global pass
+  uint64_t global_pool_revision_ = 0;       ///< changes with every change of global_pool_
+  /// What the last global pass was given: one over the same loops, estimate, drift scale and
+  /// pool decides the same, and is skipped unless a candidate's global_window ends.
+  struct GlobalInputs {
+    uint64_t graph_revision = ~uint64_t(0);
+    uint64_t pool_revision = ~uint64_t(0);
+    double drift_scale = 0.0;
+    bool operator==(const GlobalInputs& o) const {
+      return graph_revision == o.graph_revision && pool_revision == o.pool_revision && drift_scale == o.drift_scale;
+    }
+  };
+  GlobalInputs last_global_inputs_;
   std::vector<LoopDecision> decisions_;    ///< not yet taken
   std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
 };
