@@ -206,6 +206,15 @@ def scenarios(a):
     return entries
 
 
+def commit():
+    """The clone's commit, or None where there is no git (a fresh machine, a tarball)."""
+    try:
+        out = subprocess.run(["git", "-C", bench.ROOT, "rev-parse", "HEAD"], capture_output=True, text=True)
+    except OSError:
+        return None
+    return out.stdout.strip() or None
+
+
 def resume_or_start_over(a):
     """Finished runs are kept only for the same binary, YAMLs, split and --set: else
     OUT/runs is emptied (a rebuilt rover_replay or an edited YAML starts over)."""
@@ -292,8 +301,7 @@ def main(argv=None):
     with open(os.path.join(a.out, "summary.md"), "w") as f:
         f.write(text)
     meta = {"split": a.split, "families": a.families, "settings": {s: SETTINGS[s] for s in settings}, "set": a.set,
-            "commit": subprocess.run(["git", "-C", bench.ROOT, "rev-parse", "HEAD"], capture_output=True,
-                                     text=True).stdout.strip(), "runs": len(rows),
+            "commit": commit(), "runs": len(rows),
             "failed": errors, "counts_disagree_with_replay": disagree,
             "wall_seconds": round(time.perf_counter() - t0, 1)}
     with open(os.path.join(a.out, "meta.json"), "w") as f:

@@ -247,3 +247,13 @@ def test_robustness_starts_over_for_another_build_or_set(tmp_path):
     assert json.loads(done.read_text())["tp"] == 9999
     assert robustness.main(args + ["--set", "revoke_group=0"]) == 0  # other --set: starts over
     assert json.loads(done.read_text())["tp"] == real_tp
+
+
+def test_robustness_runs_where_there_is_no_git(tmp_path, monkeypatch):
+    """A fresh machine has no git (fresh-debian caught it): the commit is then left out."""
+    import shutil
+    robustness = script("bench/robustness.py")
+    if shutil.which("git") and os.path.isdir(os.path.join(bench.ROOT, ".git")):
+        assert robustness.commit()  # this clone
+    monkeypatch.setenv("PATH", str(tmp_path))  # no git on it
+    assert robustness.commit() is None
