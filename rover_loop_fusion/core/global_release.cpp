@@ -64,11 +64,11 @@ void Verifier::globalPass() {
   last_global_pass_ = now;
   // Nothing it depends on changed since the last pass (keyframes after the newest anchor do
   // not enter the condensed graph): that pass's outcome stands, unless a window ends.
+  auto expired = [&](const HeldCandidate& h) {
+    return now >= h.arrived + static_cast<size_t>(config_.global.global_window);
+  };
   const GlobalInputs inputs{graph_.revision(), global_pool_revision_, rule_->driftScale()};
-  bool window_ends = false;
-  for (const HeldCandidate& h : global_pool_)
-    window_ends = window_ends || now >= h.arrived + static_cast<size_t>(config_.global.global_window);
-  if (inputs == last_global_inputs_ && !window_ends) return;
+  if (inputs == last_global_inputs_ && std::none_of(global_pool_.begin(), global_pool_.end(), expired)) return;
   last_global_inputs_ = inputs;
   const double c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
   const double tear = chiSquareQuantile(config_.global.global_tear_probability, 4);
@@ -135,8 +135,7 @@ void Verifier::globalPass() {
     const GlobalLoop& r = found[i];
     if (releasable[i]) {
       released.push_back(h);
-    } else if (now >= h.arrived + static_cast<size_t>(config_.global.global_window) ||
-               !graph_.connected(h.query_pos, h.match_pos)) {
+    } else if (expired(h) || !graph_.connected(h.query_pos, h.match_pos)) {
       std::ostringstream s;
       s.precision(3);
       s << std::fixed << "not released by the global pass within global_window=" << config_.global.global_window

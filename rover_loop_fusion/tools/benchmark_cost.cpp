@@ -349,11 +349,14 @@ int runGraph(const Options& o, const GraphPlan& p) {
                    it_med, it_max, p50, p90, p99, mx, full, full_iterations, full / p50, full / p99,
                    cfg.trial.time_budget_ms, commits_cut, verifier_rss, peak_rss);
   }
-  if (!commit_ms.empty())
+  if (!commit_ms.empty()) {
+    char last[64] = "refused";
+    if (last_commit_ms >= 0) std::snprintf(last, sizeof(last), "%.3f ms", last_commit_ms);
     std::printf("    commits while building the graph: %zu, p50 %.3f ms, p99 %.3f ms, max %.3f ms; the last true "
-                "candidate of span %d committed after the measurements: %.3f ms\n",
+                "candidate of span %d committed after the measurements: %s\n",
                 commit_ms.size(), percentile(commit_ms, 50), percentile(commit_ms, 99), percentile(commit_ms, 100),
-                p.spans.back(), last_commit_ms);
+                p.spans.back(), last);
+  }
   std::fflush(stdout);
   if (csv) std::fclose(csv);
   if (vcsv) std::fclose(vcsv);
