@@ -14,19 +14,63 @@ namespace core {
 
 namespace {
 
-/// The edge's blocks J_u^T J_v of the Gauss-Newton Hessian at the columns c[0], c[1] (-1: a
-/// state that is not solved for).
-void addHessianBlocks(const Eigen::Matrix4d* const J[2], const int c[2], std::vector<Eigen::Triplet<double>>* trip) {
-  for (int u = 0; u < 2; ++u) {
-    if (c[u] < 0) continue;
-    for (int v = 0; v < 2; ++v) {
-      if (c[v] < 0) continue;
-      const Eigen::Matrix4d B = J[u]->transpose() * (*J[v]);
-      for (int r = 0; r < 4; ++r)
-        for (int s = 0; s < 4; ++s) trip->emplace_back(4 * c[u] + r, 4 * c[v] + s, B(r, s));
+/// The Gauss-Newton Hessian over the free anchors (4 columns each; col[i] = -1: a state that is
+/// not solved for) in compressed form, its structure built once: where each edge's blocks
+/// J_u^T J_v go, so that an iteration adds them in place instead of sorting ~64 triplets per
+/// edge again. The blocks are added in edge order, the order in which setFromTriplets sums
+/// duplicates: the matrix is the triplets' one, bit for bit.
+class NormalMatrix {
+ public:
+  NormalMatrix(const std::vector<CondensedEdge>& edges, const std::vector<int>& col, int n) : H_(4 * n, 4 * n) {
+    std::vector<Eigen::Triplet<double>> structure;
+    structure.reserve(edges.size() * 64);
+    for (const CondensedEdge& e : edges) {
+      const int c[2] = {col[e.from], col[e.to]};
+      for (int u = 0; u < 2; ++u)
+        for (int v = 0; v < 2; ++v)
+          if (c[u] >= 0 && c[v] >= 0)
+            for (int r = 0; r < 4; ++r)
+              for (int s = 0; s < 4; ++s) structure.emplace_back(4 * c[u] + r, 4 * c[v] + s, 0.0);
+    }
+    H_.setFromTriplets(structure.begin(), structure.end());
+    // Per edge and block (u, v): the value index of the block's first row in each of its 4
+    // columns (a block's rows are contiguous: all 16 of its entries are in the structure).
+    offsets_.assign(edges.size() * 16, -1);
+    for (size_t k = 0; k < edges.size(); ++k) {
+      const int c[2] = {col[edges[k].from], col[edges[k].to]};
+      for (int u = 0; u < 2; ++u)
+        for (int v = 0; v < 2; ++v) {
+          if (c[u] < 0 || c[v] < 0) continue;
+          for (int s = 0; s < 4; ++s) {
+            const int j = 4 * c[v] + s;
+            const int* begin = H_.innerIndexPtr() + H_.outerIndexPtr()[j];
+            const int* end = H_.innerIndexPtr() + H_.outerIndexPtr()[j + 1];
+            offsets_[16 * k + 8 * u + 4 * v + s] =
+                static_cast<int>(std::lower_bound(begin, end, 4 * c[u]) - H_.innerIndexPtr());
+          }
+        }
     }
   }
-}
+  void setZero() { std::fill(H_.valuePtr(), H_.valuePtr() + H_.nonZeros(), 0.0); }
+  /// Adds edge k's blocks (its whitened Jacobians at its two ends).
+  void add(size_t k, const Eigen::Matrix4d& Ja, const Eigen::Matrix4d& Jb) {
+    const Eigen::Matrix4d* J[2] = {&Ja, &Jb};
+    double* values = H_.valuePtr();
+    for (int u = 0; u < 2; ++u)
+      for (int v = 0; v < 2; ++v) {
+        const int* at = &offsets_[16 * k + 8 * u + 4 * v];
+        if (at[0] < 0) continue;
+        const Eigen::Matrix4d B = J[u]->transpose() * (*J[v]);
+        for (int s = 0; s < 4; ++s)
+          for (int r = 0; r < 4; ++r) values[at[s] + r] += B(r, s);
+      }
+  }
+  const Eigen::SparseMatrix<double>& matrix() const { return H_; }
+
+ private:
+  Eigen::SparseMatrix<double> H_;
+  std::vector<int> offsets_;
+};
 
 }  // namespace
 
@@ -86,18 +130,6 @@ Eigen::Vector4d CondensedGraph::residual(size_t e) const {
 
 double CondensedGraph::chi2(size_t e) const { return (sqrt_info_[e] * residual(e)).squaredNorm(); }
 
-namespace {
-
-/// Normal equations over the free anchors (column index per anchor, -1 if fixed).
-struct Normal {
-  std::vector<int> col;
-  int n = 0;
-  std::vector<Eigen::Triplet<double>> H;
-  Eigen::VectorXd g;
-};
-
-}  // namespace
-
 bool CondensedGraph::marginal(int gauge, int query, const Eigen::Matrix3d& frame,
                               Eigen::Matrix4d* cov) const {
   if (gauge == query) {
@@ -109,18 +141,12 @@ bool CondensedGraph::marginal(int gauge, int query, const Eigen::Matrix3d& frame
   for (size_t i = 0; i < states_.size(); ++i)
     if (!fixed_[i] && static_cast<int>(i) != gauge) col[i] = n++;
   if (col[query] < 0) return false;
-  std::vector<Eigen::Triplet<double>> trip;
-  trip.reserve(edges_.size() * 64);
+  NormalMatrix H(edges_, col, n);
   for (size_t e = 0; e < edges_.size(); ++e) {
     const Linearised L = linearise(e);
-    const int ia = col[edges_[e].from], ib = col[edges_[e].to];
-    const Eigen::Matrix4d* J[2] = {&L.Ja, &L.Jb};
-    const int c[2] = {ia, ib};
-    addHessianBlocks(J, c, &trip);
+    H.add(e, L.Ja, L.Jb);
   }
-  Eigen::SparseMatrix<double> H(4 * n, 4 * n);
-  H.setFromTriplets(trip.begin(), trip.end());
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(H);
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(H.matrix());
   if (ldlt.info() != Eigen::Success) return false;
   Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(4 * n, 4);
   rhs.block<4, 4>(4 * col[query], 0).setIdentity();
@@ -148,9 +174,9 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* 
   int it = 0;
   double previous_cost = -1.0;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;  // one ordering: the pattern stays
+  NormalMatrix H(edges_, col, n);
   for (it = 1; it <= max_iterations; ++it) {
-    std::vector<Eigen::Triplet<double>> trip;
-    trip.reserve(edges_.size() * 64);
+    H.setZero();
     Eigen::VectorXd g = Eigen::VectorXd::Zero(4 * n);
     double cost = 0.0;
     for (size_t e = 0; e < edges_.size(); ++e) {
@@ -173,7 +199,7 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* 
       const int c[2] = {col[ed.from], col[ed.to]};
       for (int u = 0; u < 2; ++u)
         if (c[u] >= 0) g.segment<4>(4 * c[u]) += J[u]->transpose() * L.r;
-      addHessianBlocks(J, c, &trip);
+      H.add(e, L.Ja, L.Jb);
     }
     if (function_tolerance > 0 && previous_cost >= 0 &&
         std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
@@ -181,10 +207,8 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* 
       return it - 1;  // this iteration's update is not needed
     }
     previous_cost = cost;
-    Eigen::SparseMatrix<double> H(4 * n, 4 * n);
-    H.setFromTriplets(trip.begin(), trip.end());
-    if (it == 1) ldlt.analyzePattern(H);
-    ldlt.factorize(H);
+    if (it == 1) ldlt.analyzePattern(H.matrix());
+    ldlt.factorize(H.matrix());
     if (ldlt.info() != Eigen::Success) {
       *ok = false;
       return it;
