@@ -17,7 +17,7 @@ namespace {
 /// The upper triangle of the Gauss-Newton Hessian over the free anchors (4 columns each, at
 /// col[i]; -1: a state that is not solved for) in compressed form, its structure built once:
 /// where each edge's blocks J_u^T J_v go, so that an iteration adds them in place instead of
-/// sorting ~64 triplets per edge again.
+/// sorting every edge's triplets again.
 class NormalMatrix {
  public:
   NormalMatrix(const std::vector<CondensedEdge>& edges, const std::vector<int>& col, int n) : H_(4 * n, 4 * n) {
