@@ -3,7 +3,8 @@
 // between anchors from the prefix moments (core/drift.h), new anchor states spread back onto
 // every keyframe (the chi2 estimate), and the condensed trial (condense_min_window): a window
 // solved on its anchors under loop_fusion's unit weighting, its keyframes placed by each
-// chain's conditional mean (expand) for scoring and adoption.
+// chain's conditional mean (expand) for scoring and adoption. 4-DoF here; the 6-DoF graph and
+// trial: condensed_trial6.cpp.
 #include "rover_loop_fusion/core/pose_graph_impl.h"
 
 #include "rover_loop_fusion/core/geometry.h"
@@ -104,10 +105,12 @@ std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::computeLoopReps(i
   return reps;
 }
 
-bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& extra, const CondenseOptions& o,
-                                   CondensedGraph* cg, std::vector<size_t>* anchors) const {
-  const std::vector<LoopRep> reps = o.trial ? loopReps(component, o.first, cfg.trial.trial_loop_anchors)
-                                            : loopReps(component, 0, cfg.chi2.max_loop_anchors);
+std::vector<KeyframeGraph::Impl::LoopRep> KeyframeGraph::Impl::condensedAnchors(int component,
+                                                                                const std::vector<size_t>& extra,
+                                                                                const CondenseOptions& o,
+                                                                                std::vector<size_t>* anchors) const {
+  std::vector<LoopRep> reps = o.trial ? loopReps(component, o.first, cfg.trial.trial_loop_anchors)
+                                      : loopReps(component, 0, cfg.chi2.max_loop_anchors);
   std::vector<size_t>& a = *anchors;
   a = extra;
   for (const LoopRep& r : reps) {
@@ -116,6 +119,13 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
   }
   std::sort(a.begin(), a.end());
   a.erase(std::unique(a.begin(), a.end()), a.end());
+  return reps;
+}
+
+bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& extra, const CondenseOptions& o,
+                                   CondensedGraph* cg, std::vector<size_t>* anchors) const {
+  const std::vector<LoopRep> reps = condensedAnchors(component, extra, o, anchors);
+  const std::vector<size_t>& a = *anchors;
   for (size_t p : a) {
     AnchorState st;
     st.p = Eigen::Vector3d(x[p].t[0], x[p].t[1], x[p].t[2]);
@@ -233,23 +243,56 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std:
     extra.push_back(l.match_pos);
     extra.push_back(l.query_pos);
   }
-  CondensedGraph cg;
   std::vector<size_t> anchors;
-  if (!condense(component, extra, options, &cg, &anchors)) return false;
-  for (const TrialLoop& l : loops) {
-    if (!l.candidate) continue;
-    CondensedEdge e;
-    e.from = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), l.match_pos) - anchors.begin());
-    e.to = static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), l.query_pos) - anchors.begin());
-    e.t = l.candidate->relative_t;
-    e.yaw = l.candidate->relative_yaw;
-    e.covariance = unitLoopCovariance();
-    if (robust_candidate) e.huber = cfg.trial.loop_huber;
-    if (!cg.addEdge(e)) return false;
-  }
+  auto anchorOf = [&](size_t p) {
+    return static_cast<int>(std::lower_bound(anchors.begin(), anchors.end(), p) - anchors.begin());
+  };
+  std::vector<KeyframeState> solved;  // per anchor
+  int iterations = 0;
   bool ok = false, converged = false;
-  const int iterations =
-      cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
+  size_t edges = 0;
+  if (fourDof()) {
+    CondensedGraph cg;
+    if (!condense(component, extra, options, &cg, &anchors)) return false;
+    for (const TrialLoop& l : loops) {
+      if (!l.candidate) continue;
+      CondensedEdge e;
+      e.from = anchorOf(l.match_pos);
+      e.to = anchorOf(l.query_pos);
+      e.t = l.candidate->relative_t;
+      e.yaw = l.candidate->relative_yaw;
+      e.covariance = unitLoopCovariance();
+      if (robust_candidate) e.huber = cfg.trial.loop_huber;
+      if (!cg.addEdge(e)) return false;
+    }
+    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
+    for (size_t i = 0; ok && i < anchors.size(); ++i) {
+      KeyframeState st = x[anchors[i]];
+      const AnchorState& a = cg.state(static_cast<int>(i));
+      for (int k = 0; k < 3; ++k) st.t[k] = a.p[k];
+      st.yaw = a.yaw;
+      solved.push_back(st);
+    }
+    edges = cg.edgeCount();
+  } else {
+    CondensedGraph6 cg;
+    if (!condense6(component, extra, options, &cg, &anchors)) return false;
+    for (const TrialLoop& l : loops) {
+      if (!l.candidate) continue;
+      CondensedEdge6 e;
+      e.from = anchorOf(l.match_pos);
+      e.to = anchorOf(l.query_pos);
+      e.t = l.candidate->relative_t;
+      e.q = l.candidate->relative_q;
+      e.covariance = unitLoopCovariance6();
+      if (robust_candidate) e.huber = cfg.trial.loop_huber;
+      if (!cg.addEdge(e)) return false;
+    }
+    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
+    for (size_t i = 0; ok && i < anchors.size(); ++i)
+      solved.push_back(stateWithPose(x[anchors[i]], cg.state(static_cast<int>(i)).p, cg.state(static_cast<int>(i)).q));
+    edges = cg.edgeCount();
+  }
   if (!ok) return false;
   out->condensed = true;
   out->first = head;
@@ -258,22 +301,18 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std:
   out->states.clear();
   for (size_t i = 0; i < anchors.size(); ++i) {
     if (anchors[i] < head) continue;  // held fixed outside the window
-    KeyframeState st = x[anchors[i]];
-    const AnchorState& a = cg.state(static_cast<int>(i));
-    for (int k = 0; k < 3; ++k) st.t[k] = a.p[k];
-    st.yaw = a.yaw;
     out->positions.push_back(anchors[i]);
-    out->states.push_back(st);
+    out->states.push_back(solved[i]);
   }
   SolveSummary& o = out->summary;
   o.iterations = iterations;
   o.converged = converged;
   o.finite = true;
   for (const KeyframeState& st : out->states)
-    if (!std::isfinite(st.t[0] + st.t[1] + st.t[2] + st.yaw)) o.finite = false;
+    if (!std::isfinite(st.t[0] + st.t[1] + st.t[2] + st.yaw + st.q[0] + st.q[1] + st.q[2] + st.q[3])) o.finite = false;
   std::ostringstream msg;
-  msg << "condensed trial of " << kfs.size() - head << " keyframes: " << anchors.size() << " anchors, "
-      << cg.edgeCount() << " edges; scored on evenly spaced keyframes";
+  msg << "condensed trial of " << kfs.size() - head << " keyframes: " << anchors.size() << " anchors, " << edges
+      << " edges; scored on evenly spaced keyframes";
   o.message = msg.str();
   o.solve_ms = msSince(t0);
   return true;
@@ -304,6 +343,7 @@ std::vector<size_t> KeyframeGraph::Impl::windowPositions(const TrialSolution& s,
 }
 
 std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, const std::vector<size_t>& targets) const {
+  if (!fourDof()) return expand6(s, targets);
   const std::vector<size_t>& a = s.positions;
   std::vector<KeyframeState> out;
   out.reserve(targets.size());

@@ -70,6 +70,19 @@ inline Eigen::Matrix3d yawGenerator() {
   return E;
 }
 
+/// [v]x: the cross product with v as a matrix ([v]x w = v x w).
+inline Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d S;
+  S << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return S;
+}
+
+/// The rotation exp([phi]x) (angle |phi| about phi).
+inline Eigen::Quaterniond rotationExp(const Eigen::Vector3d& phi) {
+  const double angle = phi.norm();
+  return angle > 0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, phi / angle)) : Eigen::Quaterniond::Identity();
+}
+
 /// A rotation about the z axis.
 inline Eigen::Quaterniond yawRotation(double yaw) {
   return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));

@@ -152,7 +152,7 @@ std::vector<Parameter> makeTable() {
   t.push_back(integer("window_margin", "keyframes", FIELD(trial.window_margin), 0, 10000,
                       "keyframes before the match also optimised and scored"));
   t.push_back(integer("condense_min_window", "keyframes", FIELD(trial.condense_min_window), 0, 100000000,
-                      "4-DoF: trials over more keyframes than this are solved on the condensed graph "
+                      "trials over more keyframes than this are solved on the condensed graph (4-DoF and 6-DoF) "
                       "(bounded cost); 0: always the full window"));
   t.push_back(integer("trial_loop_anchors", "", FIELD(trial.trial_loop_anchors), 2, 100000,
                       "accepted loops (revisits merged, then older ones thinned) at most in a condensed trial: "

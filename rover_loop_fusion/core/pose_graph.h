@@ -158,7 +158,7 @@ class KeyframeGraph {
   /// Solves the window [match - window_margin, newest] of the query's connected sequences,
   /// warm-started from X, with `candidate` as an extra loop edge (nullptr: none; robust: with
   /// the committed loops' Huber loss). The window's first keyframe and sequence 0 are held
-  /// fixed, older keyframes too. Does not change the graph. 4-DoF windows of more than
+  /// fixed, older keyframes too. Does not change the graph. Windows of more than
   /// condense_min_window keyframes are solved on the condensed graph (bounded cost; the full
   /// window if that fails). time_budget_ms <= 0: no limit;
   /// otherwise the call returns by it: a trial that cannot finish building and one iteration

@@ -12,6 +12,7 @@
 
 #include "rover_loop_fusion/core/ceres_compat.h"
 #include "rover_loop_fusion/core/condensed.h"
+#include "rover_loop_fusion/core/condensed6.h"
 #include "rover_loop_fusion/core/cost_functions.h"
 #include "rover_loop_fusion/core/drift.h"
 #include "rover_loop_fusion/core/place_graph.h"
@@ -321,13 +322,29 @@ struct KeyframeGraph::Impl {
   };
   bool condense(int component, const std::vector<size_t>& extra, const CondenseOptions& options,
                 CondensedGraph* cg, std::vector<size_t>* anchors) const;
+  /// The anchors of a condensed graph (positions, increasing: `extra` and the ends of the loops
+  /// returned, loopReps()).
+  std::vector<LoopRep> condensedAnchors(int component, const std::vector<size_t>& extra,
+                                        const CondenseOptions& options, std::vector<size_t>* anchors) const;
+  /// 6-DoF (condensed_trial6.cpp): condense() of a trial (options.trial) with full poses, the
+  /// chains' covariances from the 6-DoF chain model, loop edges with loop_fusion's 6-DoF sigmas.
+  bool condense6(int component, const std::vector<size_t>& extra, const CondenseOptions& options,
+                 CondensedGraph6* cg, std::vector<size_t>* anchors) const;
+  Matrix6d unitLoopCovariance6() const;
+  /// A chain step's translation and rotation variances (unitStepCovariance's stiffness).
+  void unitStepVariances6(double* st, double* sq) const;
+  /// `s` with position p and rotation q (its yaw that of q).
+  KeyframeState stateWithPose(KeyframeState s, const Eigen::Vector3d& p, const Eigen::Quaterniond& q) const;
+  /// expand() of a 6-DoF solution.
+  std::vector<KeyframeState> expand6(const TrialSolution& s, const std::vector<size_t>& targets) const;
   /// loop_fusion's unit weighting as covariances: of a loop edge, and of one odometry step of a
   /// chain with odometry_neighbours edges per keyframe (a uniform strain e stretches the edge to
   /// the k-th neighbour by k e: stiffness sum k^2 per step). Yaw residuals are in degrees.
   Eigen::Matrix4d unitLoopCovariance() const;
   Eigen::Matrix4d unitStepCovariance() const;
-  /// Whether trials can be condensed (4-DoF with odometry; the unit moments are kept then).
-  bool condensable() const { return fourDof() && cfg.trial.odometry_neighbours >= 1; }
+  /// Whether trials can be condensed (with odometry; 4-DoF keeps the unit moments then, 6-DoF
+  /// sums its chains when a trial needs them).
+  bool condensable() const { return cfg.trial.odometry_neighbours >= 1; }
   /// The condensed trial (solveWindow) with the `candidates` (their loops as extra edges; a
   /// TrialLoop without a candidate only makes its ends anchors); false if it could not be built
   /// or solved.

@@ -5,11 +5,13 @@ set(ROVER_CORE_SOURCES
   alignment.cpp
   drift.cpp
   condensed.cpp
+  condensed6.cpp
   place_graph.cpp
   pose_graph.cpp
   keyframe_intake.cpp
   trial_solve.cpp
   condensed_trial.cpp
+  condensed_trial6.cpp
   graph_uncertainty.cpp
   global_pass.cpp
   batch_solve.cpp

@@ -31,13 +31,17 @@ decisions (accepted flag) that agree, count and %; the candidates only A accepts
 accepts (and of them, the false ones); the disagreements where one run had a trial and the other
 none (the innovation gate, applied to estimates that the runs' own earlier trial solutions
 made differ); the agreement over the candidates with a trial solve in A or B (verdict accepted,
-score_above_threshold or not_converged); A's trials over more than N keyframes (4-DoF: those B
-condenses); |score_B - score_A| over the candidates scored in both (median, p99, max); the
+score_above_threshold or not_converged); A's trials over more than N keyframes (those B
+condenses, 4-DoF and 6-DoF); |score_B - score_A| over the candidates scored in both (median, p99, max); the
 verification time (elapsed_ms, every candidate) p50/p99/max of A and B and their ratio B/A,
 measured in this run (same-state: both trials of a candidate back to back; oracle, sequential:
 A's and B's runs of a case back to back).
+Per case too: the cases whose agreement is below 99.5 % in a comparison (table "Cases below
+99.5 %", and a count per comparison), since a pooled figure can hide a case that one disagreement
+turns.
 Writes summary.md, summary.csv (a row per family x comparison, per mode too where a family mixes
-4-DoF and 6-DoF cases, and "all") and disagreements.csv (every disagreement) into --out.
+4-DoF and 6-DoF cases, and "all"), cases.csv (a row per case x comparison) and disagreements.csv
+(every disagreement) into --out.
 Exit status non-zero only on errors, never on low agreement."""
 import argparse
 import collections
@@ -70,6 +74,8 @@ COLUMNS = [("family", "family", ""), ("comparison", "comparison", ""), ("cases",
            ("a_ms_p50", "A ms p50", ".1f"), ("a_ms_p99", "p99", ".1f"), ("a_ms_max", "max", ".1f"),
            ("b_ms_p50", "B ms p50", ".1f"), ("b_ms_p99", "p99", ".1f"), ("b_ms_max", "max", ".1f"),
            ("ratio_p50", "B/A p50", ".2f"), ("ratio_p99", "B/A p99", ".2f")]
+CASE_COLUMNS = [("family", "family", ""), ("case", "case", ""), ("mode", "mode", ""), ("comparison", "comparison", ""),
+                ("candidates", "cand", "d"), ("agree", "agree", "d"), ("agree_pct", "agree %", ".2f")]
 DISAGREEMENT_COLUMNS = [("family", "family", ""), ("comparison", "comparison", ""), ("case", "case", ""),
                         ("query", "query", "d"), ("match", "match", "d"), ("label", "label", ""),
                         ("a_accepted", "A acc", "d"), ("a_reason", "A reason", ""), ("a_score", "A score", ".4g"),
@@ -178,7 +184,7 @@ def summarise(rows, n_of):
            "trialled_agree_pct": 100.0 * np.mean([r["a_accepted"] == r["b_accepted"] for r in trial])
            if trial else float("nan"),
            "condensable": float("nan") if any(n_of(r) is None for r in rows) else
-           sum(r["a_trial"] and r["mode"] == "4dof" and r["a_window"] > n_of(r) for r in rows),
+           sum(r["a_trial"] and r["a_window"] > n_of(r) for r in rows),
            "scored": len(both), "dscore_median": bench.percentile(d, 50), "dscore_p99": bench.percentile(d, 99),
            "dscore_max": max(d) if d else float("nan")}
     for p, q in (("a", "b"), ("b", "a")):
@@ -280,13 +286,22 @@ def main(argv=None):
         for f in families:
             rows = [r for r in every if r["family"] == f]
             modes = sorted({r["mode"] for r in rows})
-            # a family with 4-DoF and 6-DoF cases (real, posegraph): each mode too (6-DoF is not condensed)
+            # a family with 4-DoF and 6-DoF cases (real, posegraph): each mode too
             groups += [(f, rows)] + ([(f"{f} {m}", [r for r in rows if r["mode"] == m]) for m in modes]
                                      if len(modes) > 1 else [])
         for family, rows in groups + ([("all", every)] if len(families) > 1 else []):
             if rows:
                 summary.append({"family": family, "comparison": comparison, **summarise(rows, n_of)})
         disagreements += [r for r in every if r["a_accepted"] != r["b_accepted"]]
+    per_case = []
+    for comparison in comparisons:
+        by_case = {}
+        for r in (r for res in results for r in res[comparison]):
+            by_case.setdefault((r["family"], r["case"], r["mode"]), []).append(r["a_accepted"] == r["b_accepted"])
+        per_case += [{"family": f, "case": c, "mode": m, "comparison": comparison, "candidates": len(v),
+                      "agree": sum(v), "agree_pct": 100.0 * np.mean(v)} for (f, c, m), v in by_case.items()]
+    bench.write_csv(per_case, os.path.join(a.out, "cases.csv"))
+    below = [r for r in per_case if r["agree_pct"] < 99.5]
     bench.write_csv(summary, os.path.join(a.out, "summary.csv"))
     with open(os.path.join(a.out, "disagreements.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=[k for k, _, _ in DISAGREEMENT_COLUMNS] + ["a_ms", "b_ms"],
@@ -308,7 +323,8 @@ def main(argv=None):
              "differ by the runs' earlier trial solutions)",
              "agree % (trials): over the candidates with a trial solve in A or B (verdict accepted, "
              "score_above_threshold or not_converged; the innovation gate rejects others before any trial); "
-             "trials > N kf: A's trials whose window has more than N keyframes, 4-DoF (the ones B condenses); "
+             "trials > N kf: A's trials whose window has more than N keyframes (the ones B condenses; 6-DoF "
+             "too since the 6-DoF condensed trial); "
              "|dscore|: over candidates scored in both [m]",
              "ms: elapsed_ms of every candidate; B/A: ratio of the percentiles, both measured in this run "
              f"(--jobs {a.jobs}; same-state: the two trials of a candidate back to back; else A's and B's runs "
@@ -319,6 +335,7 @@ def main(argv=None):
         f"the first {SHOWN} of {len(disagreements)}"
     bench.report_tables([(f"Decisions, {k}", [r for r in summary if r["comparison"] == k], COLUMNS)
                          for k in comparisons] +
+                        [("Cases below 99.5 % (every case and comparison in cases.csv)", below, CASE_COLUMNS)] +
                         [(f"Disagreements ({shown}; every one in disagreements.csv)", disagreements[:SHOWN],
                           DISAGREEMENT_COLUMNS)], a.out, notes)
     for n in notes:
@@ -327,7 +344,12 @@ def main(argv=None):
         if r["family"] in families:
             print(f"AGREEMENT {r['family']} {r['comparison']}: {r['agree']}/{r['candidates']} = "
                   f"{r['agree_pct']:.2f} % ({'>=' if r['agree_pct'] >= 99.5 else 'below'} 99.5 %)")
-    print(f"wrote {a.out}/summary.md, summary.csv, disagreements.csv")
+    for comparison in comparisons:
+        rows = [r for r in per_case if r["comparison"] == comparison]
+        print(f"AGREEMENT per case, {comparison}: {sum(r['agree_pct'] >= 99.5 for r in rows)} of {len(rows)} "
+              f"cases >= 99.5 %" + "".join(f"; {r['family']}/{r['case']} {r['agree']}/{r['candidates']}"
+                                           for r in rows if r["agree_pct"] < 99.5))
+    print(f"wrote {a.out}/summary.md, summary.csv, cases.csv, disagreements.csv")
     return 0
 
 

@@ -183,6 +183,15 @@ def test_agreement_quick(tmp_path):
         same = rows[(family, "same-state")]
         assert float(same["agree_pct"]) >= 99.0, same
         assert int(same["scored"]) > 0 and float(same["dscore_median"]) < 0.05, same
+    # Per case (cases.csv): the family's rows split by case, nothing lost or counted twice.
+    with open(tmp_path / "cases.csv") as f:
+        cases = list(csv.DictReader(f))
+    for family in ("poc", "real", "posegraph"):
+        for comparison in ("same-state", "oracle", "sequential"):
+            mine = [c for c in cases if c["family"] == family and c["comparison"] == comparison]
+            assert len(mine) == int(rows[(family, comparison)]["cases"])
+            for k in ("candidates", "agree"):
+                assert sum(int(c[k]) for c in mine) == int(rows[(family, comparison)][k])
     assert (tmp_path / "disagreements.csv").exists() and (tmp_path / "summary.md").exists()
 
 
