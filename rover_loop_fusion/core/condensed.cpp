@@ -11,7 +11,6 @@
 namespace rover_loop_fusion {
 namespace core {
 
-using condensed_detail::NormalLdlt;
 using condensed_detail::orderedColumns;
 
 int CondensedGraph::addAnchor(const AnchorState& state, double pitch, double roll, bool fixed) {
@@ -84,12 +83,13 @@ bool CondensedGraph::marginal(int gauge, int query, const Eigen::Matrix3d& frame
     const Linearised L = linearise(e);
     H.add(e, L.Ja, L.Jb);
   }
-  NormalLdlt ldlt(H.matrix());
-  if (ldlt.info() != Eigen::Success) return false;
-  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(4 * n, 4);
-  rhs.block<4, 4>(4 * col[query], 0).setIdentity();
-  const Eigen::MatrixXd X = ldlt.solve(rhs);
-  if (ldlt.info() != Eigen::Success || !X.allFinite()) return false;
+  condensed_detail::BlockLdlt<4> ldlt;
+  ldlt.analyze(H);
+  if (!ldlt.factorize(H)) return false;
+  Eigen::Matrix<double, Eigen::Dynamic, 4> X = Eigen::Matrix<double, Eigen::Dynamic, 4>::Zero(4 * n, 4);
+  X.block<4, 4>(4 * col[query], 0).setIdentity();
+  ldlt.solveInPlace(X);
+  if (!X.allFinite()) return false;
   const Eigen::Matrix4d Cw = X.block<4, 4>(4 * col[query], 0);
   Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
   T.topLeftCorner<3, 3>() = frame.transpose();

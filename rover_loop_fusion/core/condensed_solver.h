@@ -1,12 +1,13 @@
 // What the condensed graphs share (core/condensed.h: 4-DoF anchors, 4 unknowns each;
 // core/condensed6.h: 6-DoF anchors, 6 each): the sparse normal equations over the free anchors
-// in blocks of B unknowns, their fill-reducing order, and weighted Gauss-Newton with Huber edges
-// by iteratively reweighted least squares. Internal to the core.
+// in blocks of B unknowns, their fill-reducing order, their factorisation on those blocks, and
+// weighted Gauss-Newton with Huber edges by iteratively reweighted least squares. Internal to
+// the core.
 #pragma once
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
-#include <Eigen/Sparse>
-#include <Eigen/SparseCholesky>
+#include <Eigen/Sparse>  // AMDOrdering
 
 #include <algorithm>
 #include <cmath>
@@ -49,54 +50,56 @@ std::vector<int> orderedColumns(const std::vector<Edge>& edges, const std::vecto
   return col;
 }
 
-/// The upper triangle of the Gauss-Newton Hessian over the free anchors (B columns each, at
-/// B * col[i]) in compressed form, its structure built once: where each edge's blocks
-/// J_u^T J_v go, so that an iteration adds them in place instead of sorting every edge's
-/// triplets again.
+template <int B>
+using Blocks = std::vector<Eigen::Matrix<double, B, B>, Eigen::aligned_allocator<Eigen::Matrix<double, B, B>>>;
+
+/// The upper triangle of the Gauss-Newton Hessian over the free anchors in B x B blocks (anchor
+/// i's unknowns are block col[i]), block-compressed by columns, its structure built once: where
+/// each edge's blocks J_u^T J_v go, so that an iteration adds them in place.
 template <int B>
 class NormalMatrix {
  public:
   using Block = Eigen::Matrix<double, B, B>;
 
   template <class Edge>
-  NormalMatrix(const std::vector<Edge>& edges, const std::vector<int>& col, int n) : H_(B * n, B * n) {
-    std::vector<Eigen::Triplet<double>> structure;
-    structure.reserve(edges.size() * 4 * B * B);
+  NormalMatrix(const std::vector<Edge>& edges, const std::vector<int>& col, int n) : n_(n) {
+    std::vector<std::vector<int>> rows(n);  // per block column: its block rows (upper: row <= column)
+    for (int j = 0; j < n; ++j) rows[j].push_back(j);
     for (const Edge& e : edges)
-      forUpperBlocks(col[e.from], col[e.to], [&](int, int, int cu, int cv) {
-        for (int r = 0; r < B; ++r)
-          for (int s = 0; s < B; ++s) structure.emplace_back(B * cu + r, B * cv + s, 0.0);
-      });
-    H_.setFromTriplets(structure.begin(), structure.end());
-    // Per edge and block (u, v): the value index of the block's first row in each of its B
-    // columns (a block's rows are contiguous: all B * B of its entries are in the structure).
-    offsets_.assign(edges.size() * 4 * B, -1);
+      forUpperBlocks(col[e.from], col[e.to], [&](int, int, int cu, int cv) { rows[cv].push_back(cu); });
+    start_.assign(n + 1, 0);
+    for (int j = 0; j < n; ++j) {
+      std::sort(rows[j].begin(), rows[j].end());
+      rows[j].erase(std::unique(rows[j].begin(), rows[j].end()), rows[j].end());
+      start_[j + 1] = start_[j] + static_cast<int>(rows[j].size());
+      row_.insert(row_.end(), rows[j].begin(), rows[j].end());
+    }
+    values_.assign(row_.size(), Block::Zero());
+    offsets_.assign(edges.size() * 4, -1);  // per edge and block (u, v): its value index
     for (size_t k = 0; k < edges.size(); ++k)
       forUpperBlocks(col[edges[k].from], col[edges[k].to], [&](int u, int v, int cu, int cv) {
-        for (int s = 0; s < B; ++s) {
-          const int j = B * cv + s;
-          const int* begin = H_.innerIndexPtr() + H_.outerIndexPtr()[j];
-          const int* end = H_.innerIndexPtr() + H_.outerIndexPtr()[j + 1];
-          offsets_[4 * B * k + 2 * B * u + B * v + s] =
-              static_cast<int>(std::lower_bound(begin, end, B * cu) - H_.innerIndexPtr());
-        }
+        const int* begin = row_.data() + start_[cv];
+        const int* end = row_.data() + start_[cv + 1];
+        offsets_[4 * k + 2 * u + v] = static_cast<int>(std::lower_bound(begin, end, cu) - row_.data());
       });
   }
-  void setZero() { std::fill(H_.valuePtr(), H_.valuePtr() + H_.nonZeros(), 0.0); }
+  void setZero() { std::fill(values_.begin(), values_.end(), Block::Zero()); }
   /// Adds edge k's blocks (its whitened Jacobians at its two ends).
   void add(size_t k, const Block& Ja, const Block& Jb) {
     const Block* J[2] = {&Ja, &Jb};
-    double* values = H_.valuePtr();
     for (int u = 0; u < 2; ++u)
       for (int v = 0; v < 2; ++v) {
-        const int* at = &offsets_[4 * B * k + 2 * B * u + B * v];
-        if (at[0] < 0) continue;
-        const Block M = J[u]->transpose() * (*J[v]);
-        for (int s = 0; s < B; ++s)
-          for (int r = 0; r < B; ++r) values[at[s] + r] += M(r, s);
+        const int at = offsets_[4 * k + 2 * u + v];
+        if (at >= 0) values_[at].noalias() += J[u]->transpose() * (*J[v]);
       }
   }
-  const Eigen::SparseMatrix<double>& matrix() const { return H_; }
+  int blocks() const { return n_; }
+  /// Block column j: rows row(p) and values value(p) for p in [begin(j), end(j)), rows increasing
+  /// (the last is j, the diagonal block, whole).
+  int begin(int j) const { return start_[j]; }
+  int end(int j) const { return start_[j + 1]; }
+  int row(int p) const { return row_[p]; }
+  const Block& value(int p) const { return values_[p]; }
 
  private:
   /// f(u, v, col_u, col_v) for each block (u, v) of an edge with ends in columns c0, c1 that
@@ -109,13 +112,104 @@ class NormalMatrix {
         if (c[u] >= 0 && c[v] >= 0 && c[u] <= c[v]) f(u, v, c[u], c[v]);
   }
 
-  Eigen::SparseMatrix<double> H_;
+  int n_;
+  std::vector<int> start_, row_;
+  Blocks<B> values_;
   std::vector<int> offsets_;
 };
 
-/// The factorisation of the normal equations: their upper triangle, already in the order of
-/// orderedColumns().
-using NormalLdlt = Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Upper, Eigen::NaturalOrdering<int>>;
+/// A = L D L^T of a NormalMatrix in its own (already fill-reducing) order, on B x B blocks: L unit
+/// lower block-triangular, D block-diagonal. T. Davis' up-looking LDL (the algorithm of Eigen's
+/// SimplicialLDLT) with each scalar a fixed-size block: the elimination tree and the columns'
+/// lengths once (analyze), the values per iteration (factorize).
+template <int B>
+class BlockLdlt {
+ public:
+  using Block = Eigen::Matrix<double, B, B>;
+
+  void analyze(const NormalMatrix<B>& A) {
+    const int n = A.blocks();
+    parent_.assign(n, -1);
+    count_.assign(n, 0);
+    std::vector<int> flag(n);
+    for (int k = 0; k < n; ++k) {
+      flag[k] = k;
+      for (int p = A.begin(k); p < A.end(k); ++p)
+        for (int i = A.row(p); i < k && flag[i] != k; i = parent_[i]) {
+          if (parent_[i] == -1) parent_[i] = k;
+          ++count_[i];
+          flag[i] = k;
+        }
+    }
+    start_.assign(n + 1, 0);
+    for (int k = 0; k < n; ++k) start_[k + 1] = start_[k] + count_[k];
+    row_.assign(start_[n], 0);
+    L_.assign(start_[n], Block::Zero());
+    D_inv_.assign(n, Block::Zero());
+  }
+
+  /// False if a pivot block is not positive definite (the system is singular there).
+  bool factorize(const NormalMatrix<B>& A) {
+    const int n = A.blocks();
+    Blocks<B> y(n, Block::Zero());
+    std::vector<int> pattern(n), flag(n), filled(n, 0);
+    for (int k = 0; k < n; ++k) {
+      Block d = Block::Zero();
+      int top = n;
+      flag[k] = k;
+      for (int p = A.begin(k); p < A.end(k); ++p) {
+        int i = A.row(p);
+        if (i == k) {
+          d = A.value(p);
+          continue;
+        }
+        y[i] = A.value(p);
+        int len = 0;
+        for (; flag[i] != k; i = parent_[i]) {
+          pattern[len++] = i;
+          flag[i] = k;
+        }
+        while (len > 0) pattern[--top] = pattern[--len];
+      }
+      for (; top < n; ++top) {
+        const int i = pattern[top];
+        const Block yi = y[i];
+        y[i].setZero();
+        const int stop = start_[i] + filled[i];
+        for (int p = start_[i]; p < stop; ++p) y[row_[p]].noalias() -= L_[p] * yi;
+        const Block l = yi.transpose() * D_inv_[i];
+        d.noalias() -= l * yi;
+        row_[stop] = k;
+        L_[stop] = l;
+        ++filled[i];
+      }
+      const Block sym = 0.5 * (d + d.transpose());
+      Eigen::LLT<Block> llt(sym);
+      if (llt.info() != Eigen::Success) return false;
+      D_inv_[k] = llt.solve(Block::Identity());
+      if (!D_inv_[k].allFinite()) return false;
+    }
+    return true;
+  }
+
+  /// x := A^-1 x (x: B rows per block, any number of columns).
+  template <class Matrix>
+  void solveInPlace(Matrix& x) const {
+    const int n = static_cast<int>(D_inv_.size());
+    for (int j = 0; j < n; ++j)
+      for (int p = start_[j]; p < start_[j + 1]; ++p)
+        x.template middleRows<B>(B * row_[p]).noalias() -= L_[p] * x.template middleRows<B>(B * j);
+    for (int j = 0; j < n; ++j) x.template middleRows<B>(B * j) = (D_inv_[j] * x.template middleRows<B>(B * j)).eval();
+    for (int j = n - 1; j >= 0; --j)
+      for (int p = start_[j]; p < start_[j + 1]; ++p)
+        x.template middleRows<B>(B * j).noalias() -= L_[p].transpose() * x.template middleRows<B>(B * row_[p]);
+  }
+
+ private:
+  std::vector<int> parent_, count_, start_, row_;
+  Blocks<B> L_;      // L's blocks below the diagonal, by column (rows row_)
+  Blocks<B> D_inv_;  // D's blocks, inverted
+};
 
 /// Gauss-Newton on the free anchors (`fixed`: held), robust edges (`huber` > 0: Ceres' HuberLoss
 /// of that scale on the chi-square of each of the edge's `count` measurements) by iteratively
@@ -138,7 +232,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
   }
   int it = 0;
   double previous_cost = -1.0;
-  NormalLdlt ldlt;  // one symbolic analysis: the pattern stays
+  BlockLdlt<B> ldlt;  // one symbolic analysis: the pattern stays
   NormalMatrix<B> H(edges, col, n);
   for (it = 1; it <= max_iterations; ++it) {
     H.setZero();
@@ -172,14 +266,14 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
       return it - 1;  // this iteration's update is not needed
     }
     previous_cost = cost;
-    if (it == 1) ldlt.analyzePattern(H.matrix());
-    ldlt.factorize(H.matrix());
-    if (ldlt.info() != Eigen::Success) {
+    if (it == 1) ldlt.analyze(H);
+    if (!ldlt.factorize(H)) {
       *ok = false;
       return it;
     }
-    const Eigen::VectorXd dx = -ldlt.solve(g);
-    if (ldlt.info() != Eigen::Success || !dx.allFinite()) {
+    Eigen::VectorXd dx = -g;
+    ldlt.solveInPlace(dx);
+    if (!dx.allFinite()) {
       *ok = false;
       return it;
     }
