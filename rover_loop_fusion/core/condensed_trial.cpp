@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <tuple>
 #include <utility>
@@ -251,47 +252,55 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std:
   int iterations = 0;
   bool ok = false, converged = false;
   size_t edges = 0;
+  // The candidates' loops as edges (loopEdge: the measurement and covariance), the solve, and
+  // every anchor's new state (stateOf(cg, i)); false if an edge was unusable.
+  auto solveOn = [&](auto& cg, auto loopEdge, auto stateOf) {
+    for (const TrialLoop& l : loops) {
+      if (!l.candidate) continue;
+      auto e = loopEdge(*l.candidate);
+      e.from = anchorOf(l.match_pos);
+      e.to = anchorOf(l.query_pos);
+      if (robust_candidate) e.huber = cfg.trial.loop_huber;
+      if (!cg.addEdge(e)) return false;
+    }
+    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
+    for (size_t i = 0; ok && i < anchors.size(); ++i) solved.push_back(stateOf(cg, static_cast<int>(i)));
+    edges = cg.edgeCount();
+    return true;
+  };
   if (fourDof()) {
     CondensedGraph cg;
     if (!condense(component, extra, options, &cg, &anchors)) return false;
-    for (const TrialLoop& l : loops) {
-      if (!l.candidate) continue;
-      CondensedEdge e;
-      e.from = anchorOf(l.match_pos);
-      e.to = anchorOf(l.query_pos);
-      e.t = l.candidate->relative_t;
-      e.yaw = l.candidate->relative_yaw;
-      e.covariance = unitLoopCovariance();
-      if (robust_candidate) e.huber = cfg.trial.loop_huber;
-      if (!cg.addEdge(e)) return false;
-    }
-    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
-    for (size_t i = 0; ok && i < anchors.size(); ++i) {
-      KeyframeState st = x[anchors[i]];
-      const AnchorState& a = cg.state(static_cast<int>(i));
-      for (int k = 0; k < 3; ++k) st.t[k] = a.p[k];
-      st.yaw = a.yaw;
-      solved.push_back(st);
-    }
-    edges = cg.edgeCount();
+    const bool built = solveOn(
+        cg,
+        [&](const LoopCandidate& c) {
+          CondensedEdge e;
+          e.t = c.relative_t;
+          e.yaw = c.relative_yaw;
+          e.covariance = unitLoopCovariance();
+          return e;
+        },
+        [&](const CondensedGraph& g, int i) {
+          KeyframeState st = x[anchors[i]];
+          for (int k = 0; k < 3; ++k) st.t[k] = g.state(i).p[k];
+          st.yaw = g.state(i).yaw;
+          return st;
+        });
+    if (!built) return false;
   } else {
     CondensedGraph6 cg;
     if (!condense6(component, extra, options, &cg, &anchors)) return false;
-    for (const TrialLoop& l : loops) {
-      if (!l.candidate) continue;
-      CondensedEdge6 e;
-      e.from = anchorOf(l.match_pos);
-      e.to = anchorOf(l.query_pos);
-      e.t = l.candidate->relative_t;
-      e.q = l.candidate->relative_q;
-      e.covariance = unitLoopCovariance6();
-      if (robust_candidate) e.huber = cfg.trial.loop_huber;
-      if (!cg.addEdge(e)) return false;
-    }
-    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
-    for (size_t i = 0; ok && i < anchors.size(); ++i)
-      solved.push_back(stateWithPose(x[anchors[i]], cg.state(static_cast<int>(i)).p, cg.state(static_cast<int>(i)).q));
-    edges = cg.edgeCount();
+    const bool built = solveOn(
+        cg,
+        [&](const LoopCandidate& c) {
+          CondensedEdge6 e;
+          e.t = c.relative_t;
+          e.q = c.relative_q;
+          e.covariance = unitLoopCovariance6();
+          return e;
+        },
+        [&](const CondensedGraph6& g, int i) { return stateWithPose(x[anchors[i]], g.state(i).p, g.state(i).q); });
+    if (!built) return false;
   }
   if (!ok) return false;
   out->condensed = true;
@@ -342,19 +351,66 @@ std::vector<size_t> KeyframeGraph::Impl::windowPositions(const TrialSolution& s,
   return out;
 }
 
-std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, const std::vector<size_t>& targets) const {
-  if (!fourDof()) return expand6(s, targets);
-  const std::vector<size_t>& a = s.positions;
-  std::vector<KeyframeState> out;
-  out.reserve(targets.size());
-  // Per chain (anchor i to i + 1 of one segment): the weights of the conditional mean.
+/// The 4-DoF chain model's conditional mean: per chain, the weights of the gap at its end.
+class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
+ public:
+  FourDofPlacer(const Impl& m, const TrialSolution& s) : m_(m), s_(s) {}
+
+  KeyframeState place(size_t i, size_t p) override {
+    const std::vector<size_t>& a = s_.positions;
+    const auto& x = m_.x;
+    const auto& kfs = m_.kfs;
+    const size_t pa = a[i], pb = a[i + 1];
+    auto& ch = m_.chains.at(kfs[p].segment);
+    const size_t la = pa - ch.start, lb = pb - ch.start;
+    ChainFit& f = fits_[i];
+    if (!f.ready) {
+      // The rigid move of a's correction, plus the chain's share of what is left at b
+      // (expressed in the VIO frame of the moments: M maps it into the solution's).
+      const KeyframeState& na = s_.states[i];
+      const KeyframeState& nb = s_.states[i + 1];
+      f.dyaw = wrapAngle(na.yaw - x[pa].yaw);
+      f.D = yawPitchRollToRotation(f.dyaw, 0, 0);
+      f.M = f.D * yawPitchRollToRotation(wrapAngle(x[pa].yaw - kfs[pa].yaw), 0, 0);
+      const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xb(x[pb].t[0], x[pb].t[1], x[pb].t[2]);
+      const Eigen::Vector3d Pa(na.t[0], na.t[1], na.t[2]), Pb(nb.t[0], nb.t[1], nb.t[2]);
+      Eigen::Vector4d gap;
+      gap.head<3>() = f.M.transpose() * (Pb - (Pa + f.D * (xb - xa)));
+      gap[3] = wrapAngle(nb.yaw - x[pb].yaw - f.dyaw);
+      f.w = m_.unitOf(ch).cross(la, lb, lb).ldlt().solve(gap);
+      f.ready = true;
+    }
+    const Eigen::Vector4d corr = m_.unitOf(ch).cross(la, p - ch.start, lb) * f.w;
+    const KeyframeState& na = s_.states[i];
+    const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xp(x[p].t[0], x[p].t[1], x[p].t[2]);
+    const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();
+    KeyframeState st = x[p];
+    for (int k = 0; k < 3; ++k) st.t[k] = t[k];
+    st.yaw = wrapAngle(x[p].yaw + f.dyaw + corr[3]);
+    return st;
+  }
+
+ private:
   struct ChainFit {
     bool ready = false;
     double dyaw = 0;
     Eigen::Matrix3d D, M;
     Eigen::Vector4d w;
   };
-  std::map<size_t, ChainFit> fits;
+  const Impl& m_;
+  const TrialSolution& s_;
+  std::map<size_t, ChainFit> fits_;
+};
+
+std::unique_ptr<KeyframeGraph::Impl::ChainPlacer> KeyframeGraph::Impl::chainPlacer4(const TrialSolution& s) const {
+  return std::unique_ptr<ChainPlacer>(new FourDofPlacer(*this, s));
+}
+
+std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, const std::vector<size_t>& targets) const {
+  const std::vector<size_t>& a = s.positions;
+  std::vector<KeyframeState> out;
+  out.reserve(targets.size());
+  const std::unique_ptr<ChainPlacer> between = fourDof() ? chainPlacer4(s) : chainPlacer6(s);
   auto rigid = [&](size_t anchor_i, size_t p) {
     const Correction c = correctionBetween(x[a[anchor_i]], s.states[anchor_i], kfs[a[anchor_i]]);
     return applyCorrection(c, x[p], kfs[p]);
@@ -366,34 +422,7 @@ std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, c
     if (left && a[i - 1] == p) {
       out.push_back(s.states[i - 1]);
     } else if (left && right) {
-      const size_t pa = a[i - 1], pb = a[i];
-      SequenceChain& ch = chains.at(kfs[p].segment);
-      const size_t la = pa - ch.start, lb = pb - ch.start;
-      ChainFit& f = fits[i - 1];
-      if (!f.ready) {
-        // The rigid move of a's correction, plus the chain's share of what is left at b
-        // (expressed in the VIO frame of the moments: M maps it into the solution's).
-        const KeyframeState& na = s.states[i - 1];
-        const KeyframeState& nb = s.states[i];
-        f.dyaw = wrapAngle(na.yaw - x[pa].yaw);
-        f.D = yawPitchRollToRotation(f.dyaw, 0, 0);
-        f.M = f.D * yawPitchRollToRotation(wrapAngle(x[pa].yaw - kfs[pa].yaw), 0, 0);
-        const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xb(x[pb].t[0], x[pb].t[1], x[pb].t[2]);
-        const Eigen::Vector3d Pa(na.t[0], na.t[1], na.t[2]), Pb(nb.t[0], nb.t[1], nb.t[2]);
-        Eigen::Vector4d gap;
-        gap.head<3>() = f.M.transpose() * (Pb - (Pa + f.D * (xb - xa)));
-        gap[3] = wrapAngle(nb.yaw - x[pb].yaw - f.dyaw);
-        f.w = unitOf(ch).cross(la, lb, lb).ldlt().solve(gap);
-        f.ready = true;
-      }
-      const Eigen::Vector4d corr = unitOf(ch).cross(la, p - ch.start, lb) * f.w;
-      const KeyframeState& na = s.states[i - 1];
-      const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xp(x[p].t[0], x[p].t[1], x[p].t[2]);
-      const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();
-      KeyframeState st = x[p];
-      for (int k = 0; k < 3; ++k) st.t[k] = t[k];
-      st.yaw = wrapAngle(x[p].yaw + f.dyaw + corr[3]);
-      out.push_back(st);
+      out.push_back(between->place(i - 1, p));
     } else if (left) {
       out.push_back(rigid(i - 1, p));
     } else if (right) {

@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 
 namespace rover_loop_fusion {
 namespace core {
@@ -132,71 +133,63 @@ bool KeyframeGraph::Impl::condense6(int component, const std::vector<size_t>& ex
   return true;
 }
 
-std::vector<KeyframeState> KeyframeGraph::Impl::expand6(const TrialSolution& s,
-                                                        const std::vector<size_t>& targets) const {
-  const std::vector<size_t>& a = s.positions;
-  std::vector<KeyframeState> out;
-  out.reserve(targets.size());
-  double st = 0, sq = 0;
-  unitStepVariances6(&st, &sq);
-  // Per chain (anchor i to i + 1 of one segment), in the frame of X before the solution: the
-  // weights of the conditional mean, and the sums over its steps up to the last target placed
-  // (targets increase, so each chain's steps are summed once for b and once for its targets).
+/// The 6-DoF chain model's conditional mean, in the frame of X before the solution: per chain
+/// the rigid move of its first anchor and the weights of the gap at its end, and the sums over
+/// its steps up to the last keyframe placed (placed in increasing order, a chain's steps are
+/// summed once for its end and once for its keyframes).
+class KeyframeGraph::Impl::SixDofPlacer : public ChainPlacer {
+ public:
+  SixDofPlacer(const Impl& m, const TrialSolution& s) : m_(m), s_(s) {
+    m.unitStepVariances6(&st_, &sq_);
+  }
+
+  KeyframeState place(size_t i, size_t p) override {
+    const std::vector<size_t>& a = s_.positions;
+    const auto& x = m_.x;
+    const size_t pa = a[i], pb = a[i + 1];
+    const Eigen::Vector3d xa = positionOf(x[pa]), xb = positionOf(x[pb]);
+    auto found = fits_.find(i);
+    if (found == fits_.end()) {
+      ChainFit f;
+      f.Rc = rotationQ(s_.states[i]).toRotationMatrix() * rotationQ(x[pa]).toRotationMatrix().transpose();
+      f.tc = positionOf(s_.states[i]) - f.Rc * xa;
+      // What is left at b after the rigid move, as a change of b in X's frame.
+      Vector6d gap;
+      gap.head<3>() = f.Rc.transpose() * (positionOf(s_.states[i + 1]) - f.tc) - xb;
+      const Eigen::AngleAxisd turn(f.Rc.transpose() * rotationQ(s_.states[i + 1]).toRotationMatrix() *
+                                   rotationQ(x[pb]).toRotationMatrix().transpose());
+      gap.tail<3>() = turn.angle() * turn.axis();
+      ChainSums all;
+      for (size_t k = pa + 1; k <= pb; ++k) all.add(positionOf(x[k]) - xa);
+      f.w = all.cross(xb - xa, xb - xa, st_, sq_).ldlt().solve(gap);
+      f.next = pa + 1;
+      found = fits_.emplace(i, f).first;
+    }
+    ChainFit& f = found->second;
+    for (; f.next <= p; ++f.next) f.sums.add(positionOf(x[f.next]) - xa);
+    const Vector6d corr = f.sums.cross(positionOf(x[p]) - xa, xb - xa, st_, sq_) * f.w;
+    const Eigen::Vector3d t = f.Rc * (positionOf(x[p]) + corr.head<3>()) + f.tc;
+    const Eigen::Quaterniond q(f.Rc * rotationExp(corr.tail<3>()).toRotationMatrix() *
+                               rotationQ(x[p]).toRotationMatrix());
+    return m_.stateWithPose(x[p], t, q);
+  }
+
+ private:
   struct ChainFit {
-    Eigen::Matrix3d Rc;     // the rigid move of a: R_c, t_c
+    Eigen::Matrix3d Rc;  // the rigid move of the chain's first anchor: R_c, t_c
     Eigen::Vector3d tc;
-    Vector6d w;             // C_bb^-1 gap
-    ChainSums sums;         // over the steps (a, next)
+    Vector6d w;          // C_bb^-1 gap
+    ChainSums sums;      // over the steps (a, next)
     size_t next;
   };
-  std::map<size_t, ChainFit> fits;
-  auto rigid = [&](size_t anchor_i, size_t p) {
-    const Correction c = correctionBetween(x[a[anchor_i]], s.states[anchor_i], kfs[a[anchor_i]]);
-    return applyCorrection(c, x[p], kfs[p]);
-  };
-  for (size_t p : targets) {
-    const size_t i = std::upper_bound(a.begin(), a.end(), p) - a.begin();  // anchors [0, i) are <= p
-    const bool left = i > 0 && kfs[a[i - 1]].segment == kfs[p].segment;
-    const bool right = i < a.size() && kfs[a[i]].segment == kfs[p].segment;
-    if (left && a[i - 1] == p) {
-      out.push_back(s.states[i - 1]);
-    } else if (left && right) {
-      const size_t pa = a[i - 1], pb = a[i];
-      const Eigen::Vector3d xa = positionOf(x[pa]);
-      auto found = fits.find(i - 1);
-      if (found == fits.end()) {
-        ChainFit f;
-        const Eigen::Matrix3d Ra = rotationQ(x[pa]).toRotationMatrix();
-        f.Rc = rotationQ(s.states[i - 1]).toRotationMatrix() * Ra.transpose();
-        f.tc = positionOf(s.states[i - 1]) - f.Rc * xa;
-        // What is left at b after the rigid move, as a change of b in X's frame.
-        const Eigen::Vector3d xb = positionOf(x[pb]);
-        Vector6d gap;
-        gap.head<3>() = f.Rc.transpose() * (positionOf(s.states[i]) - f.tc) - xb;
-        const Eigen::AngleAxisd turn(f.Rc.transpose() * rotationQ(s.states[i]).toRotationMatrix() *
-                                     rotationQ(x[pb]).toRotationMatrix().transpose());
-        gap.tail<3>() = turn.angle() * turn.axis();
-        ChainSums all;
-        for (size_t k = pa + 1; k <= pb; ++k) all.add(positionOf(x[k]) - xa);
-        f.w = all.cross(xb - xa, xb - xa, st, sq).ldlt().solve(gap);
-        f.next = pa + 1;
-        found = fits.emplace(i - 1, f).first;
-      }
-      ChainFit& f = found->second;
-      for (; f.next <= p; ++f.next) f.sums.add(positionOf(x[f.next]) - xa);
-      const Vector6d corr = f.sums.cross(positionOf(x[p]) - xa, positionOf(x[pb]) - xa, st, sq) * f.w;
-      const Eigen::Vector3d t = f.Rc * (positionOf(x[p]) + corr.head<3>()) + f.tc;
-      const Eigen::Quaterniond q(f.Rc * rotationExp(corr.tail<3>()).toRotationMatrix() * rotationQ(x[p]).toRotationMatrix());
-      out.push_back(stateWithPose(x[p], t, q));
-    } else if (left) {
-      out.push_back(rigid(i - 1, p));
-    } else if (right) {
-      out.push_back(rigid(i, p));
-    } else {
-      out.push_back(x[p]);
-    }
-  }
-  return out;
+  const Impl& m_;
+  const TrialSolution& s_;
+  double st_ = 0, sq_ = 0;
+  std::map<size_t, ChainFit> fits_;
+};
+
+std::unique_ptr<KeyframeGraph::Impl::ChainPlacer> KeyframeGraph::Impl::chainPlacer6(const TrialSolution& s) const {
+  return std::unique_ptr<ChainPlacer>(new SixDofPlacer(*this, s));
 }
 
 }  // namespace core

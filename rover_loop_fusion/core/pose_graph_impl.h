@@ -335,8 +335,20 @@ struct KeyframeGraph::Impl {
   void unitStepVariances6(double* st, double* sq) const;
   /// `s` with position p and rotation q (its yaw that of q).
   KeyframeState stateWithPose(KeyframeState s, const Eigen::Vector3d& p, const Eigen::Quaterniond& q) const;
-  /// expand() of a 6-DoF solution.
-  std::vector<KeyframeState> expand6(const TrialSolution& s, const std::vector<size_t>& targets) const;
+  /// Places keyframes between two anchors of a condensed solution by the chain model's
+  /// conditional mean (expand()); it keeps what it computed per chain for the next keyframes.
+  class ChainPlacer {
+   public:
+    virtual ~ChainPlacer() = default;
+    /// The new state of position p between the solution's anchors i and i + 1 (one segment).
+    virtual KeyframeState place(size_t i, size_t p) = 0;
+  };
+  /// 4-DoF (condensed_trial.cpp) and 6-DoF (condensed_trial6.cpp); the 6-DoF one wants its
+  /// positions p increasing within a chain, as expand() hands them.
+  class FourDofPlacer;
+  class SixDofPlacer;
+  std::unique_ptr<ChainPlacer> chainPlacer4(const TrialSolution& s) const;
+  std::unique_ptr<ChainPlacer> chainPlacer6(const TrialSolution& s) const;
   /// loop_fusion's unit weighting as covariances: of a loop edge, and of one odometry step of a
   /// chain with odometry_neighbours edges per keyframe (a uniform strain e stretches the edge to
   /// the k-th neighbour by k e: stiffness sum k^2 per step). Yaw residuals are in degrees.
