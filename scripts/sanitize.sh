@@ -50,9 +50,13 @@ run_gtest() {
   return 1
 }
 
+# A test binary of a sanitizer build loads that build's core library, not the workspace's
+# (LD_LIBRARY_PATH from devel/setup.bash comes before the binary's RUNPATH): else the library
+# goes unchecked, and Eigen's allocators, which differ under ASan, mix across the two.
 asan() {
   build sanitize ROVER_SANITIZE "$WS/sanitize.log" test_core
-  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+  LD_LIBRARY_PATH="$WS/devel_sanitize/lib:${LD_LIBRARY_PATH:-}" \
+    ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
     run_gtest test_core_asan_ubsan "$WS/sanitize_run.log" "$WS/devel_sanitize/lib/rover_loop_fusion/test_core"
 }
 
@@ -60,8 +64,8 @@ tsan() {
   build tsan ROVER_TSAN "$WS/tsan.log" test_core rover_test_adapter_stress rover_loop_fusion_plugins
   export TSAN_OPTIONS="suppressions=$ROOT/test/tsan.supp halt_on_error=1 second_deadlock_stack=1"
   local rc=0
-  run_gtest test_core_concurrency_tsan "$WS/tsan_core_run.log" \
-    "$WS/devel_tsan/lib/rover_loop_fusion/test_core" --gtest_filter='Concurrency*' || rc=1
+  LD_LIBRARY_PATH="$WS/devel_tsan/lib:${LD_LIBRARY_PATH:-}" run_gtest test_core_concurrency_tsan \
+    "$WS/tsan_core_run.log" "$WS/devel_tsan/lib/rover_loop_fusion/test_core" --gtest_filter='Concurrency*' || rc=1
   # The adapter stress test needs a master and the indoor YAML in /loop_fusion/rover (as
   # adapter_stress.test gives it), and pluginlib must load the TSan build of the plugins:
   # devel_tsan first on the search paths.
