@@ -45,10 +45,14 @@ Eigen::Matrix4d KeyframeGraph::Impl::unitLoopCovariance() const {
   return C;
 }
 
-Eigen::Matrix4d KeyframeGraph::Impl::unitStepCovariance() const {
+double KeyframeGraph::Impl::stepStiffness() const {
   double stiffness = 0.0;
   for (int k = 1; k <= cfg.trial.odometry_neighbours; ++k) stiffness += k * k;
-  Eigen::Matrix4d C = Eigen::Matrix4d::Identity() / stiffness;
+  return stiffness;
+}
+
+Eigen::Matrix4d KeyframeGraph::Impl::unitStepCovariance() const {
+  Eigen::Matrix4d C = Eigen::Matrix4d::Identity() / stepStiffness();
   C(3, 3) /= kYawResidualScale * kYawResidualScale;
   return C;
 }

@@ -80,8 +80,7 @@ Matrix6d KeyframeGraph::Impl::unitLoopCovariance6() const {
 }
 
 void KeyframeGraph::Impl::unitStepVariances6(double* st, double* sq) const {
-  double stiffness = 0.0;
-  for (int k = 1; k <= cfg.trial.odometry_neighbours; ++k) stiffness += k * k;
+  const double stiffness = stepStiffness();
   *st = kSixDofTranslationSigma * kSixDofTranslationSigma / stiffness;
   *sq = kSixDofRotationSigma * kSixDofRotationSigma / stiffness;
 }

@@ -354,6 +354,8 @@ struct KeyframeGraph::Impl {
   /// the k-th neighbour by k e: stiffness sum k^2 per step). Yaw residuals are in degrees.
   Eigen::Matrix4d unitLoopCovariance() const;
   Eigen::Matrix4d unitStepCovariance() const;
+  /// The stiffness of one chain step under edges to odometry_neighbours neighbours: sum k^2.
+  double stepStiffness() const;
   /// Whether trials can be condensed (with odometry; 4-DoF keeps the unit moments then, 6-DoF
   /// sums its chains when a trial needs them).
   bool condensable() const { return cfg.trial.odometry_neighbours >= 1; }
