@@ -38,10 +38,10 @@ CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
   const CondensedEdge& ed = edges_[e];
   const AnchorState& a = states_[ed.from];
   const AnchorState& b = states_[ed.to];
-  const Eigen::Matrix3d Ra = yawPitchRollToRotation(a.yaw, pitch_[ed.from], roll_[ed.from]);
+  const Eigen::Matrix3d Ra = rotationOf(ed.from);
   const Eigen::Vector3d d = b.p - a.p;
   Linearised L;
-  L.r = residual(e);
+  L.r = residual(e, Ra);
   L.Ja.setZero();
   L.Jb.setZero();
   L.Ja.topLeftCorner<3, 3>() = -Ra.transpose();
@@ -56,11 +56,16 @@ CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
   return L;
 }
 
-Eigen::Vector4d CondensedGraph::residual(size_t e) const {
+Eigen::Matrix3d CondensedGraph::rotationOf(int anchor) const {
+  return yawPitchRollToRotation(states_[anchor].yaw, pitch_[anchor], roll_[anchor]);
+}
+
+Eigen::Vector4d CondensedGraph::residual(size_t e) const { return residual(e, rotationOf(edges_[e].from)); }
+
+Eigen::Vector4d CondensedGraph::residual(size_t e, const Eigen::Matrix3d& Ra) const {
   const CondensedEdge& ed = edges_[e];
   const AnchorState& a = states_[ed.from];
   const AnchorState& b = states_[ed.to];
-  const Eigen::Matrix3d Ra = yawPitchRollToRotation(a.yaw, pitch_[ed.from], roll_[ed.from]);
   Eigen::Vector4d r;
   r.head<3>() = Ra.transpose() * (b.p - a.p) - ed.t;
   r[3] = wrapAngle(b.yaw - a.yaw - ed.yaw);
@@ -98,9 +103,9 @@ bool CondensedGraph::marginal(int gauge, int query, const Eigen::Matrix3d& frame
 }
 
 int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* converged,
-                          double function_tolerance) {
+                          double function_tolerance, double chord) {
   return condensed_detail::gaussNewton<4>(
-      edges_, fixed_, max_iterations, tolerance, function_tolerance, ok, converged,
+      edges_, fixed_, max_iterations, tolerance, function_tolerance, chord, ok, converged,
       [this](size_t e) { return linearise(e); },
       [this](size_t i, const Eigen::Ref<const Eigen::Vector4d>& dx) {
         states_[i].p += dx.head<3>();

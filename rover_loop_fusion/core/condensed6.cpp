@@ -71,9 +71,9 @@ CondensedGraph6::Linearised CondensedGraph6::linearise(size_t e) const {
 }
 
 int CondensedGraph6::solve(int max_iterations, double tolerance, bool* ok, bool* converged,
-                           double function_tolerance) {
+                           double function_tolerance, double chord) {
   return condensed_detail::gaussNewton<6>(
-      edges_, fixed_, max_iterations, tolerance, function_tolerance, ok, converged,
+      edges_, fixed_, max_iterations, tolerance, function_tolerance, chord, ok, converged,
       [this](size_t e) { return linearise(e); },
       [this](size_t i, const Eigen::Ref<const Vector6d>& dx) {
         AnchorPose& s = states_[i];

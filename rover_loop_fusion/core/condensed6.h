@@ -49,7 +49,7 @@ class CondensedGraph6 {
   Vector6d residual(size_t e) const;
   /// As CondensedGraph::solve.
   int solve(int max_iterations, double tolerance, bool* ok, bool* converged = nullptr,
-            double function_tolerance = 0.0);
+            double function_tolerance = 0.0, double chord = 0.0);
 
  private:
   struct Linearised {

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 namespace rover_loop_fusion {
@@ -218,10 +219,13 @@ class BlockLdlt {
 /// anchor i by its update. Stops when the largest update is below `tolerance`, when the cost
 /// changed by less than `function_tolerance` of itself (0: never), or after `max_iterations`;
 /// returns the iterations run. *ok false: singular or not finite (states as after the last
-/// good update).
+/// good update). `chord` > 0: the factorisation of an iteration is kept for the next ones
+/// (chord steps: the gradient is always the current one, so the fixed point is Gauss-Newton's)
+/// while each step shrinks to at most `chord` times the one before; a step that shrank less
+/// has the next iteration factorise its own matrix. 0: every iteration factorises.
 template <int B, class Edge, class Linearise, class Step>
 int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, int max_iterations, double tolerance,
-                double function_tolerance, bool* ok, bool* converged, Linearise linearise, Step step) {
+                double function_tolerance, double chord, bool* ok, bool* converged, Linearise linearise, Step step) {
   *ok = true;
   if (converged) *converged = false;
   int n = 0;
@@ -234,8 +238,10 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
   double previous_cost = -1.0;
   BlockLdlt<B> ldlt;  // one symbolic analysis: the pattern stays
   NormalMatrix<B> H(edges, col, n);
+  bool refactor = true;
+  double previous_step = std::numeric_limits<double>::infinity();
   for (it = 1; it <= max_iterations; ++it) {
-    H.setZero();
+    if (refactor) H.setZero();
     Eigen::VectorXd g = Eigen::VectorXd::Zero(B * n);
     double cost = 0.0;
     for (size_t e = 0; e < edges.size(); ++e) {
@@ -258,7 +264,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
       const int c[2] = {col[ed.from], col[ed.to]};
       for (int u = 0; u < 2; ++u)
         if (c[u] >= 0) g.template segment<B>(B * c[u]) += J[u]->transpose() * L.r;
-      H.add(e, L.Ja, L.Jb);
+      if (refactor) H.add(e, L.Ja, L.Jb);
     }
     if (function_tolerance > 0 && previous_cost >= 0 &&
         std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
@@ -267,7 +273,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
     }
     previous_cost = cost;
     if (it == 1) ldlt.analyze(H);
-    if (!ldlt.factorize(H)) {
+    if (refactor && !ldlt.factorize(H)) {
       *ok = false;
       return it;
     }
@@ -279,7 +285,10 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
     }
     for (size_t i = 0; i < fixed.size(); ++i)
       if (col[i] >= 0) step(i, dx.template segment<B>(B * col[i]));
-    if (dx.cwiseAbs().maxCoeff() < tolerance) {
+    const double largest = dx.cwiseAbs().maxCoeff();
+    refactor = chord <= 0 || largest > chord * previous_step;
+    previous_step = largest;
+    if (largest < tolerance) {
       if (converged) *converged = true;
       break;
     }

@@ -34,6 +34,10 @@ constexpr double kSpreadYaw = 1e-6;          // rad
 /// A condensed trial has converged when no anchor moves by more than this in an iteration
 /// (metres; radians for yaw).
 constexpr double kCondensedTolerance = 1e-6;
+/// A trial's Gauss-Newton keeps its factorisation while each step is at most half the one
+/// before (CondensedGraph::solve's chord): the robust loops' reweighting converges linearly
+/// anyway, and one factorisation instead of one per iteration halves a whole-run trial's solve.
+constexpr double kTrialChord = 0.5;
 }  // namespace
 
 // ---- the condensed graph of a component ------------------------------------------------
@@ -215,10 +219,11 @@ void KeyframeGraph::Impl::spread(int component, const std::vector<size_t>& ancho
         gap[3] = wrapAngle(nb.yaw - (kfs[pb].yaw + dyaw));
         const size_t la = pa - ch.start, lb = pb - ch.start;
         const ChainMomentsView moments = momentsOf(ch);
-        const Eigen::Matrix4d Cbb = moments.cross(la, lb, lb);
+        const ChainMoments::Sums prefix_a = moments.prefix(la);
+        const Eigen::Matrix4d Cbb = moments.cross(prefix_a, la, lb, lb);
         const Eigen::Vector4d w = Cbb.ldlt().solve(gap);
         for (size_t p = pa + 1; p < pb; ++p) {
-          const Eigen::Vector4d corr = moments.cross(la, p - ch.start, lb) * w;
+          const Eigen::Vector4d corr = moments.cross(prefix_a, la, p - ch.start, lb) * w;
           const Eigen::Vector3d t = Pa + Rd * (kfs[p].vio.t - kfs[pa].vio.t) + Rd * corr.head<3>();
           KeyframeState& s = x[p];
           for (int k = 0; k < 3; ++k) s.t[k] = t[k];
@@ -267,7 +272,8 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std:
       if (robust_candidate) e.huber = cfg.trial.loop_huber;
       if (!cg.addEdge(e)) return false;
     }
-    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance);
+    iterations = cg.solve(std::max(1, max_iterations), kCondensedTolerance, &ok, &converged, cfg.trial.function_tolerance,
+                          kTrialChord);
     for (size_t i = 0; ok && i < anchors.size(); ++i) solved.push_back(stateOf(cg, static_cast<int>(i)));
     edges = cg.edgeCount();
     return true;
@@ -347,10 +353,11 @@ std::vector<std::pair<size_t, size_t>> KeyframeGraph::Impl::windowRanges(const T
 std::vector<size_t> KeyframeGraph::Impl::windowPositions(const TrialSolution& s, size_t stride,
                                                          bool skip_fixed_map) const {
   std::vector<size_t> out;
-  size_t k = 0;
-  for (const auto& range : windowRanges(s, skip_fixed_map))
-    for (size_t p = range.first; p < range.second; ++p, ++k)
-      if (k % stride == 0) out.push_back(p);
+  size_t k = 0;  // keyframes counted over the ranges before this one
+  for (const auto& range : windowRanges(s, skip_fixed_map)) {
+    for (size_t p = range.first + (stride - k % stride) % stride; p < range.second; p += stride) out.push_back(p);
+    k += range.second - range.first;
+  }
   std::sort(out.begin(), out.end());
   return out;
 }
@@ -381,10 +388,12 @@ class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
       Eigen::Vector4d gap;
       gap.head<3>() = f.M.transpose() * (Pb - (Pa + f.D * (xb - xa)));
       gap[3] = wrapAngle(nb.yaw - x[pb].yaw - f.dyaw);
-      f.w = m_.unitOf(ch).cross(la, lb, lb).ldlt().solve(gap);
+      const ChainMomentsView unit = m_.unitOf(ch);
+      f.prefix_a = unit.prefix(la);
+      f.w = unit.cross(f.prefix_a, la, lb, lb).ldlt().solve(gap);
       f.ready = true;
     }
-    const Eigen::Vector4d corr = m_.unitOf(ch).cross(la, p - ch.start, lb) * f.w;
+    const Eigen::Vector4d corr = m_.unitOf(ch).cross(f.prefix_a, la, p - ch.start, lb) * f.w;
     const KeyframeState& na = s_.states[i];
     const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xp(x[p].t[0], x[p].t[1], x[p].t[2]);
     const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();
@@ -400,6 +409,7 @@ class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
     double dyaw = 0;
     Eigen::Matrix3d D, M;
     Eigen::Vector4d w;
+    ChainMoments::Sums prefix_a;  // the chain's moments up to a, for every keyframe placed
   };
   const Impl& m_;
   const TrialSolution& s_;

@@ -49,11 +49,18 @@ ChainMoments::Sums ChainMoments::step(const ChainSteps& steps, size_t j) {
   Sums s;
   if (j == 0) return s;
   const Eigen::Matrix4d S = steps.stepCovariance(j);
-  const Eigen::Matrix3d Rj = steps.rotation(j);
   const Eigen::Vector3d pj = steps.position(j);
-  s.A = Rj * S.topLeftCorner<3, 3>() * Rj.transpose();
-  s.b = Rj * S.topRightCorner<3, 1>();
-  s.Bp = s.b * pj.transpose();
+  const Eigen::Matrix3d Stt = S.topLeftCorner<3, 3>();
+  if (S.topRightCorner<3, 1>().isZero(0.0) && (Stt - Stt(0, 0) * Eigen::Matrix3d::Identity()).isZero(0.0)) {
+    // Isotropic in translation, no cross term (loop_fusion's unit weighting): R S R^T = S and
+    // the rotation is not needed.
+    s.A = Stt;
+  } else {
+    const Eigen::Matrix3d Rj = steps.rotation(j);
+    s.A = Rj * Stt * Rj.transpose();
+    s.b = Rj * S.topRightCorner<3, 1>();
+    s.Bp = s.b * pj.transpose();
+  }
   s.c = S(3, 3);
   s.cp = s.c * pj;
   s.Cpp = s.c * pj * pj.transpose();
@@ -68,10 +75,16 @@ ChainMoments::Sums ChainMoments::prefix(const ChainSteps& steps, size_t k) const
 }
 
 Eigen::Matrix4d ChainMoments::cross(const ChainSteps& steps, size_t a, size_t k, size_t b) const {
+  if (k <= a) return Eigen::Matrix4d::Zero();
+  return cross(steps, prefix(steps, a), a, k, b);
+}
+
+Eigen::Matrix4d ChainMoments::cross(const ChainSteps& steps, const Sums& prefix_a, size_t a, size_t k,
+                                    size_t b) const {
   Eigen::Matrix4d C = Eigen::Matrix4d::Zero();
   if (k <= a) return C;
   Sums s = prefix(steps, k);
-  s.add(prefix(steps, a), -1.0);
+  s.add(prefix_a, -1.0);
   const Eigen::Matrix3d E = yawGenerator();
   const Eigen::Vector3d pk = steps.position(k);
   const Eigen::Vector3d pb = steps.position(b);

@@ -65,7 +65,6 @@ class ChainMoments {
   /// the frame `Ra` (normally a's rotation: the 4-DoF residual's R_a^T), yaw.
   Eigen::Matrix4d relative(const ChainSteps& steps, size_t a, size_t b, const Eigen::Matrix3d& Ra) const;
 
- private:
   /// The six sums over steps (0, k]: A = sum W_tt, b = sum W_ty, Bp = sum W_ty p^T,
   /// c = sum W_yy, cp = sum W_yy p, Cpp = sum W_yy p p^T.
   struct Sums {
@@ -79,6 +78,11 @@ class ChainMoments {
   };
   /// Sums over (0, k]: a stored checkpoint every kStride keyframes plus the steps after it.
   Sums prefix(const ChainSteps& steps, size_t k) const;
+  /// cross(a, k, b) from prefix(a), which a caller asking for many k with the same a keeps:
+  /// the same arithmetic without summing a's steps again.
+  Eigen::Matrix4d cross(const ChainSteps& steps, const Sums& prefix_a, size_t a, size_t k, size_t b) const;
+
+ private:
   static Sums step(const ChainSteps& steps, size_t j);
 
   static constexpr size_t kStride = 8;

@@ -173,6 +173,10 @@ struct KeyframeGraph::Impl {
     const ChainMoments& moments;
     SegmentSteps steps;
     Eigen::Matrix4d cross(size_t a, size_t k, size_t b) const { return moments.cross(steps, a, k, b); }
+    ChainMoments::Sums prefix(size_t a) const { return moments.prefix(steps, a); }
+    Eigen::Matrix4d cross(const ChainMoments::Sums& prefix_a, size_t a, size_t k, size_t b) const {
+      return moments.cross(steps, prefix_a, a, k, b);
+    }
     Eigen::Matrix4d relative(size_t a, size_t b, const Eigen::Matrix3d& Ra) const {
       return moments.relative(steps, a, b, Ra);
     }

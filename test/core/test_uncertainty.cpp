@@ -106,6 +106,41 @@ TEST(ChainMoments, RelativeCovarianceEqualsTheStepByStepSumForAnyPair) {
   EXPECT_GT(v80, 4.0 * v20);
 }
 
+TEST(ChainMoments, IsotropicStepsAndAKeptPrefixGiveTheStepByStepSum) {
+  // loop_fusion's unit weighting: the same variance on x, y, z (the moments skip the rotation
+  // then), on a chain that turns and tilts; and cross() from a prefix the caller keeps.
+  core::DriftModel model;
+  Chain c = makeChain(100, model, 3);
+  for (size_t j = 1; j < c.cov.size(); ++j) {
+    c.cov[j] = Eigen::Matrix4d::Identity() / 30.0;
+    c.cov[j](3, 3) = 1e-4;
+  }
+  const core::StoredChainMoments m = moments(c);
+  const size_t pairs[][2] = {{0, 99}, {3, 61}, {8, 16}, {40, 99}};
+  for (const auto& ab : pairs)
+    EXPECT_LT(relErr(m.relative(ab[0], ab[1], c.R[ab[0]]), bySteps(c, ab[0], ab[1])), 1e-10) << ab[0] << " -> " << ab[1];
+  core::StoredChainMoments general;  // the same steps, one of them not isotropic
+  for (size_t j = 0; j < c.p.size(); ++j) {
+    Eigen::Matrix4d cov = c.cov[j];
+    if (j == 50) cov(0, 0) *= 2.0;
+    general.append(c.p[j], c.R[j], cov);
+  }
+  Chain c50 = c;
+  c50.cov[50](0, 0) *= 2.0;
+  EXPECT_LT(relErr(general.relative(3, 61, c.R[3]), bySteps(c50, 3, 61)), 1e-10);
+  EXPECT_GT(relErr(general.relative(3, 61, c.R[3]), bySteps(c, 3, 61)), 1e-6);
+  // cross(a, k, b) from a kept prefix(a): the same numbers, for every k.
+  core::ChainMoments cm;
+  cm.extend(m, m.size());
+  const size_t a = 13, b = 77;
+  const core::ChainMoments::Sums prefix_a = cm.prefix(m, a);
+  for (size_t k = a; k <= b; ++k) {
+    const Eigen::Matrix4d kept = cm.cross(m, prefix_a, a, k, b);
+    EXPECT_TRUE((kept.array() == cm.cross(m, a, k, b).array()).all()) << k;
+    EXPECT_TRUE((kept.array() == m.cross(a, k, b).array()).all()) << k;
+  }
+}
+
 TEST(ChainMoments, MatchesTheMarginalOfTheFullChainSolvedKeyframeByKeyframe) {
   core::DriftModel model;
   const Chain c = makeChain(60, model, 11);
@@ -150,6 +185,44 @@ TEST(CondensedGraph, ChainsCondensedToOneEdgeGiveTheSameMarginalWithLoops) {
   const double chain_only = m.relative(45, 110, c.R[45]).topLeftCorner<3, 3>().trace();
   const double with_loops = b.topLeftCorner<3, 3>().trace();
   EXPECT_LT(with_loops, 0.5 * chain_only);
+}
+
+TEST(CondensedGraph, ChordStepsReachGaussNewtonsSolution) {
+  // Every keyframe an anchor, three loops that pull (one by 2 m and 10 degrees), robust as a
+  // trial's: the solve that keeps its factorisation ends where the one that refactorises does.
+  core::DriftModel model;
+  const Chain c = makeChain(120, model, 5);
+  Eigen::Matrix4d loop_cov = Eigen::Matrix4d::Identity() * 0.05 * 0.05;
+  loop_cov(3, 3) = std::pow(M_PI / 180.0, 2);
+  auto build = [&]() {
+    core::CondensedGraph g;
+    for (size_t j = 0; j < c.p.size(); ++j) g.addAnchor(stateOf(c, j), c.pitch[j], c.roll[j], j == 0);
+    for (size_t j = 1; j < c.p.size(); ++j) g.addEdge(odometryEdge(c, j - 1, j, bySteps(c, j - 1, j), j - 1, j));
+    const std::vector<std::pair<size_t, size_t>> loops = {{10, 70}, {30, 100}, {12, 110}};
+    for (size_t i = 0; i < loops.size(); ++i) {
+      core::CondensedEdge e = odometryEdge(c, loops[i].first, loops[i].second, loop_cov, loops[i].first, loops[i].second);
+      if (i == 2) {
+        e.t += Eigen::Vector3d(2.0, -1.0, 0.0);
+        e.yaw = core::wrapAngle(e.yaw + 10.0 * M_PI / 180.0);
+      }
+      e.huber = 0.1;
+      g.addEdge(e);
+    }
+    return g;
+  };
+  core::CondensedGraph newton = build(), chord = build();
+  bool ok_n = false, ok_c = false, conv_n = false, conv_c = false;
+  newton.solve(200, 1e-10, &ok_n, &conv_n, 0.0, 0.0);
+  const int it = chord.solve(200, 1e-10, &ok_c, &conv_c, 0.0, 0.5);
+  ASSERT_TRUE(ok_n && ok_c && conv_n && conv_c);
+  EXPECT_LT(it, 200);
+  double far = 0.0;
+  for (size_t j = 1; j < c.p.size(); ++j) {
+    far = std::max(far, (newton.state(j).p - chord.state(j).p).norm());
+    far = std::max(far, std::abs(core::wrapAngle(newton.state(j).yaw - chord.state(j).yaw)));
+  }
+  EXPECT_LT(far, 1e-8);
+  EXPECT_GT((newton.state(110).p - c.p[110]).norm(), 0.05) << "the loops moved the graph";
 }
 
 TEST(CondensedGraph, SolveMovesAnchorsToSatisfyALoopAndReportsSingularSystems) {
