@@ -73,8 +73,8 @@ class CondensedGraph {
   /// the solution not finite (states then unchanged since the last good iterate).
   /// Also stops when the cost changed by less than `function_tolerance` of itself in an
   /// iteration (as Ceres; 0: never). *converged (optional): whether it stopped on a tolerance.
-  /// `chord` > 0 reuses an iteration's factorisation while the steps shrink by that factor or
-  /// more (same fixed point; core/condensed_solver.h); 0: a factorisation per iteration.
+  /// `chord` > 0 reuses the last factorisation while the steps shrink by that factor (same
+  /// fixed point; core/condensed_solver.h); 0: a factorisation per iteration.
   int solve(int max_iterations, double tolerance, bool* ok, bool* converged = nullptr,
             double function_tolerance = 0.0, double chord = 0.0);
 

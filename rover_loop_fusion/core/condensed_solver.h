@@ -219,10 +219,12 @@ class BlockLdlt {
 /// anchor i by its update. Stops when the largest update is below `tolerance`, when the cost
 /// changed by less than `function_tolerance` of itself (0: never), or after `max_iterations`;
 /// returns the iterations run. *ok false: singular or not finite (states as after the last
-/// good update). `chord` > 0: the factorisation of an iteration is kept for the next ones
-/// (chord steps: the gradient is always the current one, so the fixed point is Gauss-Newton's)
-/// while each step shrinks to at most `chord` times the one before; a step that shrank less
-/// has the next iteration factorise its own matrix. 0: every iteration factorises.
+/// good update). `chord` > 0: after a step at most `chord` times the one before, the next
+/// iteration tries the last factorisation again (a chord step: the gradient is always the
+/// current one, so the fixed point is Gauss-Newton's); a chord step larger than the step
+/// before is not taken (the iteration factorises its own matrix and takes Gauss-Newton's
+/// step instead), and a step that shrank by less than `chord` has the next iteration
+/// factorise. 0: every iteration factorises.
 template <int B, class Edge, class Linearise, class Step>
 int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, int max_iterations, double tolerance,
                 double function_tolerance, double chord, bool* ok, bool* converged, Linearise linearise, Step step) {
@@ -241,7 +243,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
   bool refactor = true;
   double previous_step = std::numeric_limits<double>::infinity();
   for (it = 1; it <= max_iterations; ++it) {
-    if (refactor) H.setZero();
+    H.setZero();
     Eigen::VectorXd g = Eigen::VectorXd::Zero(B * n);
     double cost = 0.0;
     for (size_t e = 0; e < edges.size(); ++e) {
@@ -264,7 +266,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
       const int c[2] = {col[ed.from], col[ed.to]};
       for (int u = 0; u < 2; ++u)
         if (c[u] >= 0) g.template segment<B>(B * c[u]) += J[u]->transpose() * L.r;
-      if (refactor) H.add(e, L.Ja, L.Jb);
+      H.add(e, L.Ja, L.Jb);
     }
     if (function_tolerance > 0 && previous_cost >= 0 &&
         std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
@@ -273,15 +275,23 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
     }
     previous_cost = cost;
     if (it == 1) ldlt.analyze(H);
-    if (refactor && !ldlt.factorize(H)) {
-      *ok = false;
-      return it;
-    }
     Eigen::VectorXd dx = -g;
-    ldlt.solveInPlace(dx);
-    if (!dx.allFinite()) {
-      *ok = false;
-      return it;
+    bool taken = false;
+    if (!refactor) {  // the chord step, unless it grows
+      ldlt.solveInPlace(dx);
+      taken = dx.allFinite() && dx.cwiseAbs().maxCoeff() <= previous_step;
+      if (!taken) dx = -g;
+    }
+    if (!taken) {  // Gauss-Newton's step
+      if (!ldlt.factorize(H)) {
+        *ok = false;
+        return it;
+      }
+      ldlt.solveInPlace(dx);
+      if (!dx.allFinite()) {
+        *ok = false;
+        return it;
+      }
     }
     for (size_t i = 0; i < fixed.size(); ++i)
       if (col[i] >= 0) step(i, dx.template segment<B>(B * col[i]));

@@ -34,9 +34,9 @@ constexpr double kSpreadYaw = 1e-6;          // rad
 /// A condensed trial has converged when no anchor moves by more than this in an iteration
 /// (metres; radians for yaw).
 constexpr double kCondensedTolerance = 1e-6;
-/// A trial's Gauss-Newton keeps its factorisation while each step is at most half the one
-/// before (CondensedGraph::solve's chord): the robust loops' reweighting converges linearly
-/// anyway, and one factorisation instead of one per iteration halves a whole-run trial's solve.
+/// A trial's Gauss-Newton reuses its last factorisation while the steps at least halve
+/// (CondensedGraph::solve's chord): the robust loops' reweighting converges linearly anyway,
+/// and a whole-run trial factorises once or twice instead of four or five times.
 constexpr double kTrialChord = 0.5;
 }  // namespace
 
