@@ -20,7 +20,7 @@ Writes OUT/results.csv (a row per case and setting: TP/FP/TN/FN from the verdict
 the scenario's labels, checked against rover_replay's own line), OUT/summary.md (TP/FP/FN per
 family and setting; recall per case over the settings, its spread = max - min, the cases above
 --spread listed) and OUT/meta.json. An interrupted run goes on where it stopped (a finished run
-has its done.json) if the rover_replay binary, the YAMLs of config/, the split and --set are
+has its done.json) if the rover_replay binary and its libraries, the YAMLs of config/, the split and --set are
 the same; otherwise it starts over. The real family and the pose graphs read ../shared/data.
 """
 import argparse
@@ -215,11 +215,20 @@ def commit():
     return out.stdout.strip() or None
 
 
+def build_files(replay):
+    """rover_replay and the package's shared libraries it loads (the devel space's lib/, the
+    directory above the binary's): the verifier lives in the core library, so a rebuilt core
+    with an unchanged rover_replay is another build."""
+    libdir = os.path.dirname(os.path.dirname(os.path.abspath(replay)))
+    return [replay] + sorted(glob.glob(os.path.join(libdir, "librover_loop_fusion*.so")))
+
+
 def resume_or_start_over(a):
-    """Finished runs are kept only for the same binary, YAMLs, split and --set: else
-    OUT/runs is emptied (a rebuilt rover_replay or an edited YAML starts over)."""
+    """Finished runs are kept only for the same build (build_files), YAMLs, split and --set:
+    else OUT/runs is emptied (a rebuilt rover_replay or core library, or an edited YAML, starts
+    over)."""
     digest = hashlib.sha256()
-    for path in [a.replay] + sorted(glob.glob(os.path.join(bench.ROOT, "config", "*.yaml"))):
+    for path in build_files(a.replay) + sorted(glob.glob(os.path.join(bench.ROOT, "config", "*.yaml"))):
         with open(path, "rb") as f:
             digest.update(f.read())
     key = {"inputs_sha256": digest.hexdigest(), "split": a.split, "set": a.set_flags}

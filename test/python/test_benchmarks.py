@@ -258,6 +258,31 @@ def test_robustness_starts_over_for_another_build_or_set(tmp_path):
     assert json.loads(done.read_text())["tp"] == real_tp
 
 
+def test_robustness_starts_over_for_a_rebuilt_core_library(tmp_path, monkeypatch):
+    """The verifier is in the core library: a rebuilt core with the same rover_replay binary
+    is another build (it was not, and reused the runs of the build before)."""
+    import json
+    robustness = script("bench/robustness.py")
+    files = robustness.build_files(bench.tool("rover_replay"))
+    assert any(os.path.basename(f) == "librover_loop_fusion_core.so" for f in files), files
+    fake_core = tmp_path / "librover_loop_fusion_core.so"
+    fake_core.write_bytes(b"one build")
+    monkeypatch.setattr(robustness, "build_files", lambda replay: [replay, str(fake_core)])
+    out = tmp_path / "rob"
+    args = ["--quick", "--families", "poc", "--settings", "base", "--out", str(out), "--jobs", "1"]
+    assert robustness.main(args) == 0
+    done = next((out / "runs" / "poc").glob("*/base/done.json"))
+    row = json.loads(done.read_text())
+    real_tp = row["tp"]
+    row["tp"] = 9999
+    done.write_text(json.dumps(row))
+    robustness.main(args)  # the same build: resumed
+    assert json.loads(done.read_text())["tp"] == 9999
+    fake_core.write_bytes(b"another build")
+    assert robustness.main(args) == 0  # the core rebuilt: starts over
+    assert json.loads(done.read_text())["tp"] == real_tp
+
+
 def test_robustness_runs_where_there_is_no_git(tmp_path, monkeypatch):
     """A fresh machine has no git (fresh-debian caught it): the commit is then left out."""
     import shutil
