@@ -240,20 +240,29 @@ def test_robustness_settings_scale_the_yaml_or_the_case_flag(tmp_path):
         robustness.setting_flags(["--config", str(cfg)], "gate0.9")
 
 
-def test_robustness_starts_over_for_another_build_or_set(tmp_path):
-    """Finished runs are reused only for the same binary, YAMLs, split and --set."""
+def resumed_robustness_run(robustness, tmp_path):
+    """A finished quick sweep (poc, base setting) whose done.json now says tp 9999, what a
+    resumed run would read back; resumed once with the same inputs, it must still say so.
+    Returns (args, done.json, the real tp)."""
     import json
-    robustness = script("bench/robustness.py")
     out = tmp_path / "rob"
     args = ["--quick", "--families", "poc", "--settings", "base", "--out", str(out), "--jobs", "1"]
     assert robustness.main(args) == 0
     done = next((out / "runs" / "poc").glob("*/base/done.json"))
     row = json.loads(done.read_text())
     real_tp = row["tp"]
-    row["tp"] = 9999  # what a finished run of the same inputs would be read back as
+    row["tp"] = 9999
     done.write_text(json.dumps(row))
     robustness.main(args)  # the same inputs: resumed, the finished run is not redone
     assert json.loads(done.read_text())["tp"] == 9999
+    return args, done, real_tp
+
+
+def test_robustness_starts_over_for_another_build_or_set(tmp_path):
+    """Finished runs are reused only for the same binary, YAMLs, split and --set."""
+    import json
+    robustness = script("bench/robustness.py")
+    args, done, real_tp = resumed_robustness_run(robustness, tmp_path)
     assert robustness.main(args + ["--set", "revoke_group=0"]) == 0  # other --set: starts over
     assert json.loads(done.read_text())["tp"] == real_tp
 
@@ -268,16 +277,7 @@ def test_robustness_starts_over_for_a_rebuilt_core_library(tmp_path, monkeypatch
     fake_core = tmp_path / "librover_loop_fusion_core.so"
     fake_core.write_bytes(b"one build")
     monkeypatch.setattr(robustness, "build_files", lambda replay: [replay, str(fake_core)])
-    out = tmp_path / "rob"
-    args = ["--quick", "--families", "poc", "--settings", "base", "--out", str(out), "--jobs", "1"]
-    assert robustness.main(args) == 0
-    done = next((out / "runs" / "poc").glob("*/base/done.json"))
-    row = json.loads(done.read_text())
-    real_tp = row["tp"]
-    row["tp"] = 9999
-    done.write_text(json.dumps(row))
-    robustness.main(args)  # the same build: resumed
-    assert json.loads(done.read_text())["tp"] == 9999
+    args, done, real_tp = resumed_robustness_run(robustness, tmp_path)
     fake_core.write_bytes(b"another build")
     assert robustness.main(args) == 0  # the core rebuilt: starts over
     assert json.loads(done.read_text())["tp"] == real_tp
