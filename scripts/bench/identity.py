@@ -9,11 +9,12 @@ that two builds can be compared file by file.
   ./scripts/bench.sh identity compare NAME_A NAME_B
 
 build    writes every case's scenario (the family's setup(): same candidates, same order) and a
-         manifest (cases.json) once; scenarios do not depend on the C++ build.
+         manifest (cases.json) once; scenarios do not depend on the C++ build. A case of both
+         splits (the simulated scenes share ten names, with other seeds) gets one per split.
 run      replays every scenario (a run interrupted goes on where it stopped) with one rover_replay build (default: the workspace's; another
          build's binary with its libraries beside it: --replay DIR/rover_replay, LD_LIBRARY_PATH
          DIR/lib), in every configuration of CONFIGS and both protocols (sequential, oracle),
-         into out/NAME/<family>/<case>/<config>-<protocol>.csv (verdicts.csv without solve_ms,
+         into out/NAME/<family>/<split>/<case>/<config>-<protocol>.csv (verdicts.csv without solve_ms,
          elapsed_ms, and the time in a detail text) and the trajectories' TUM files.
 compare  counts the verdict rows and trajectory files that are identical between two runs and
          lists every difference; exit status 1 if anything differs.
@@ -61,7 +62,7 @@ def build(a):
         module = FAMILIES[family]
         for split in splits.SPLITS:
             for case in splits.cases(family, split, False):
-                base = os.path.join(a.out, "scenarios", family)
+                base = os.path.join(a.out, "scenarios", family, split)
                 _, d, prob, rover_args = module.setup(case, base)
                 manifest.append({"family": family, "case": case.name, "split": split, "dir": d,
                                  "flags": [str(x) for x in methods.rover_flags(case.environment, prob, rover_args)]})
@@ -69,9 +70,13 @@ def build(a):
     for name, env in SHIPPED:
         manifest.append({"family": "shipped", "case": name, "split": "-", "dir": os.path.join(bench.ROOT, "data", name),
                          "flags": bench.shipped(env, "--time_budget_ms", "0")})
+    dirs = [e["dir"] for e in manifest]
+    if len(set(dirs)) != len(dirs):  # one scenario written over another: a run would compare less
+        raise SystemExit("identity build: two cases share a scenario directory")
     with open(os.path.join(a.out, "cases.json"), "w") as f:
         json.dump(manifest, f, indent=1)
     print(f"{len(manifest)} scenarios; manifest {os.path.join(a.out, 'cases.json')}")
+    return 0
 
 
 def strip(src, dst):
@@ -90,7 +95,7 @@ def strip(src, dst):
 
 def replay_one(job):
     entry, config, protocol, out, replay, libdir, config_dir = job
-    d = os.path.join(out, entry["family"], entry["case"])
+    d = os.path.join(out, entry["family"], entry["split"] if entry["split"] != "-" else "", entry["case"])
     os.makedirs(d, exist_ok=True)
     if os.path.exists(os.path.join(d, f"{config}-{protocol}.csv")):  # done by an interrupted run
         return None

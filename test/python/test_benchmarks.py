@@ -291,3 +291,29 @@ def test_robustness_runs_where_there_is_no_git(tmp_path, monkeypatch):
         assert robustness.commit()  # this clone
     monkeypatch.setenv("PATH", str(tmp_path))  # no git on it
     assert robustness.commit() is None
+
+
+def test_identity_keeps_both_splits_of_a_case(tmp_path, monkeypatch):
+    """The simulated scenes share case names between the splits (other seeds). Identity wrote
+    both splits' scenarios into one directory and skipped the second split's runs as done: a
+    comparison covered one of them. Each split now has its own scenario and verdicts."""
+    import json
+    from roverlib import splits as roverlib_splits
+    identity = script("bench/identity.py")
+    room = {split: [c for c in roverlib_splits.cases("poc", split, False) if c.name == "room_s0.05"]
+            for split in roverlib_splits.SPLITS}
+    assert all(len(cases) == 1 for cases in room.values()), "room_s0.05 is in both splits"
+    monkeypatch.setattr(roverlib_splits, "cases", lambda family, split, quick: room[split])
+    monkeypatch.setattr(identity, "SHIPPED", ())
+    out = str(tmp_path)
+    assert identity.main(["build", "--out", out, "--families", "poc"]) == 0
+    dirs = {e["split"]: e["dir"] for e in json.load(open(os.path.join(out, "cases.json")))}
+    assert sorted(dirs) == sorted(roverlib_splits.SPLITS) and len(set(dirs.values())) == len(dirs)
+    assert identity.main(["run", "--out", out, "--tag", "a", "--configs", "shipped", "--jobs", "1"]) == 0
+    verdicts = {s: _rows(os.path.join(out, "a", "poc", s, "room_s0.05", "shipped-sequential.csv"))
+                for s in roverlib_splits.SPLITS}
+    labels = {s: _rows(os.path.join(dirs[s], "candidates.csv")) for s in dirs}
+    for s in dirs:  # each split's final verdicts are its own scenario's candidates
+        assert sorted((r["query_index"], r["match_index"]) for r in verdicts[s] if r["final"] == "1") == \
+            sorted((r["query_index"], r["match_index"]) for r in labels[s])
+    assert labels["tuning"] != labels["test"], "other seeds, other candidates"
