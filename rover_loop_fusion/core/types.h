@@ -385,7 +385,7 @@ struct RevisitConfig {
   double revisit_max_sigma = 0.0;
   /// The hypothesis' trial: its deformation score must be at most
   /// max(threshold, revisit_score_sigmas x the relative position's largest standard deviation).
-  double revisit_score_sigmas = 0.7;
+  double revisit_score_sigmas = 0.65;
   /// Rival hypotheses of one revisit compete by misfit = median Mahalanobis distance of their
   /// members minus revisit_member_weight per member beyond the first (support counts, in units
   /// of d2); a hypothesis is released only if its misfit is lower than every rival's by
