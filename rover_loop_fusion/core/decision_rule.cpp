@@ -241,6 +241,14 @@ class RevisitRule : public MetricRule {
 
   void learn(const Decided& decided) override { calibration_.add(decided.innovation, decided.chain_covariance); }
 
+  bool retestAlone(const LoopCandidate& c, size_t qpos, size_t mpos, std::string* why) override {
+    Verdict measured;
+    TrialSolution solution;
+    const Check check = metricDecision(cfg_, g_, c, qpos, mpos, -1, Clock::now(), &measured, &solution);
+    *why = check.detail;
+    return check.passed;
+  }
+
   double driftScale() const override { return calibration_.scale(); }
 
   double misfit(const HeldGroup& group) override {

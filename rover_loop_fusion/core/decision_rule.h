@@ -57,6 +57,13 @@ class DecisionRule {
   /// Decides a held candidate again, against the graph as it is now; when it passes, *decided
   /// holds what adoptDecided() needs once the loop is in the graph.
   virtual bool recheck(const LoopCandidate& c, size_t query_pos, size_t match_pos, Decided* decided) = 0;
+  /// decision revisit: a member of a revisit hypothesis that is being dropped, tested alone again
+  /// with the per-candidate (metric) test against the graph as it is now (other loops of its
+  /// revisit may have closed the drift since it was held). Other rules: false.
+  virtual bool retestAlone(const LoopCandidate& c, size_t query_pos, size_t match_pos, std::string* why) {
+    (void)c, (void)query_pos, (void)match_pos, (void)why;
+    return false;
+  }
   /// A loop that decide() or recheck() passed has been added to the graph: X takes what was
   /// worked out for it (metric: the trial's X*; chi2: the condensed solve, unless
   /// `update_estimate` is false and the caller updates X once for a group: updateEstimate).

@@ -43,7 +43,7 @@ void HeldCandidates::releaseDropping(size_t i, const Actions& act, const std::st
   act.release(released);
   for (size_t j = 0; j < groups_.size();) {
     if (contradicts(groups_[j], released)) {
-      act.drop(groups_[j], why);
+      act.drop(groups_[j], why, true);
       groups_.erase(groups_.begin() + j);
     } else {
       ++j;
@@ -107,7 +107,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
         s << "not confirmed by " << k << " agreeing candidates within confirm_window=" << window << " keyframes";
       const HeldGroup expired = g;
       groups_.erase(groups_.begin() + i);
-      act.drop(expired, s.str());
+      act.drop(expired, s.str(), false);
       continue;
     }
     ++i;
@@ -128,7 +128,7 @@ bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
     if (!act.judge(g, &why)) {
       const HeldGroup failed = g;
       groups_.erase(groups_.begin() + i);
-      act.drop(failed, why);
+      act.drop(failed, why, false);
       return true;
     }
     // Rival hypotheses of the same revisit compete by fit and support: the release waits until
@@ -157,7 +157,7 @@ bool HeldCandidates::settleRevisit(size_t i, const Actions& act) {
       << " members) was not released within revisit_window=" << now_window << " keyframes";
     const HeldGroup expired = g;
     groups_.erase(groups_.begin() + i);
-    act.drop(expired, s.str());
+    act.drop(expired, s.str(), false);
     return true;
   }
   return false;

@@ -21,6 +21,7 @@
 #include "rover_loop_fusion/core/types.h"
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -37,6 +38,7 @@ struct HeldCandidate {
   size_t arrived = 0;  ///< keyframes in the graph when it was held
   HoldKind kind = HoldKind::kNoPrior;
   double d2 = 0.0;     ///< kRevisit: its innovation's Mahalanobis distance when it was held
+  uint64_t revision = 0;  ///< the graph's revision (its loops) when it was held
 };
 using HeldGroup = std::vector<HeldCandidate>;
 
@@ -61,7 +63,9 @@ class HeldCandidates {
     /// A confirmed group (may change the graph).
     std::function<void(const HeldGroup&)> release;
     /// A group given up, with why.
-    std::function<void(const HeldGroup&, const std::string&)> drop;
+    /// `contradicted`: dropped because a released group contradicts it (a revisit member is
+    /// then not tested alone again).
+    std::function<void(const HeldGroup&, const std::string&, bool contradicted)> drop;
     /// kRevisit: whether a hypothesis passes its joint test against the prior now (why not in
     /// *why).
     std::function<bool(const HeldGroup&, std::string* why)> judge;

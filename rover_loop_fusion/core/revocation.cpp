@@ -25,6 +25,7 @@ HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
   h.query_segment = graph_.segmentAt(h.query_pos);
   h.match_segment = graph_.segmentAt(h.match_pos);
   h.arrived = graph_.keyframeCount();
+  h.revision = graph_.revision();
   return h;
 }
 

@@ -235,10 +235,28 @@ void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict v
   decisions_.push_back(d);
 }
 
-void Verifier::drop(const HeldGroup& group, const std::string& why) {
-  for (const HeldCandidate& h : group)
+void Verifier::drop(const HeldGroup& group, const std::string& why, bool contradicted) {
+  for (const HeldCandidate& h : group) {
+    // A revisit member is tested alone once more before it goes if loops were committed since
+    // it was held (one of its revisit, accepted alone on the fast path, may have closed the
+    // drift that made it fail), unless a released group contradicts it.
+    std::string again;
+    const bool retest = !contradicted && h.kind == HoldKind::kRevisit && h.revision != graph_.revision() &&
+                        graph_.connected(h.query_pos, h.match_pos);
+    if (retest && rule_->retestAlone(h.candidate, h.query_pos, h.match_pos, &again)) {
+      pending_.valid = false;
+      const Status s = commitLocked(h.candidate, true);
+      if (s.ok) {
+        decide(LoopDecision::Kind::kRelease, h.candidate,
+               Verdict::Accept(h.candidate, "its revisit hypothesis was not released (" + why +
+                                                "); tested alone again: " + again));
+        continue;
+      }
+    }
     if (!addToGlobalPool(h))
-      decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, why));
+      decide(LoopDecision::Kind::kDrop, h.candidate,
+             Verdict::Reject(Reason::kUnconfirmed, h.candidate, retest ? why + "; tested alone again: " + again : why));
+  }
 }
 
 void Verifier::settle() {
@@ -246,7 +264,7 @@ void Verifier::settle() {
   act.rival_targets = [this](const HeldGroup& g) { return rivalTargets(g); };
   act.settle_rivals = [this](const HeldGroup& g, const std::vector<LoopCandidate>& loops) { settleRivals(g, loops); };
   act.release = [this](const HeldGroup& g) { release(g); };
-  act.drop = [this](const HeldGroup& g, const std::string& why) { drop(g, why); };
+  act.drop = [this](const HeldGroup& g, const std::string& why, bool contradicted) { drop(g, why, contradicted); };
   act.judge = [this](const HeldGroup& g, std::string* why) { return judgeRevisit(g, why); };
   act.misfit = [this](const HeldGroup& g) { return rule_->misfit(g); };
   held_.settle(graph_.keyframeCount(), act);

@@ -154,7 +154,7 @@ class Verifier {
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
   void release(const HeldGroup& group);
-  void drop(const HeldGroup& group, const std::string& why);
+  void drop(const HeldGroup& group, const std::string& why, bool contradicted);
   /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
   void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);

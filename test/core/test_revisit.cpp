@@ -207,3 +207,46 @@ TEST(RevisitRule, AHeldCandidateWithoutItsRevisitIsDroppedAfterRevisitWindow) {
     EXPECT_NE(d.verdict.detail.find("revisit_window"), std::string::npos) << d.verdict.detail;
   }
 }
+
+TEST(RevisitRule, AMemberWhoseRevisitAnotherLoopClosedIsTestedAloneBeforeItIsDropped) {
+  // Inside a real loop_fusion (look-alike world, more drift) the first true candidate of a
+  // revisit failed the metric test by millimetres and was held; the next ones passed alone, so
+  // its hypothesis never reached revisit_support and the held loop was dropped, though the
+  // revisit it belonged to was closed. A member is now tested alone once more when its
+  // hypothesis is dropped: against the closed revisit it passes and is taken.
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.revisit.revisit_support = 100;  // no hypothesis is released: only the drop decides
+  cfg.revisit.revisit_window = 10;
+  Verifier v(cfg);
+  std::vector<core::LoopCandidate> trues;
+  for (const sim::SimCandidate& c : s.candidates)
+    if (c.is_true) trues.push_back(c.candidate);
+  ASSERT_GE(trues.size(), 4u);
+  const core::LoopCandidate first = trues[0];
+  const std::vector<core::LoopCandidate> closing(trues.begin() + 1, trues.begin() + 4);  // committed as accepted loops
+  bool held = false;
+  std::vector<LoopDecision> decisions;
+  for (const sim::SimKeyframe& kf : s.keyframes) {
+    ASSERT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
+    if (kf.index == first.query_index) {
+      const Verdict vd = v.verify(first);
+      ASSERT_TRUE(vd.deferred) << "the first true candidate must be held for the test to mean anything: " << vd.detail;
+      held = true;
+    }
+    for (const core::LoopCandidate& c : closing) {
+      if (kf.index == c.query_index) {
+        ASSERT_TRUE(v.commit(c).ok);
+      }
+    }
+    for (const LoopDecision& d : v.takeDecisions()) decisions.push_back(d);
+  }
+  ASSERT_TRUE(held);
+  ASSERT_EQ(decisions.size(), 1u);
+  const LoopDecision& d = decisions.front();
+  EXPECT_EQ(d.candidate.query_index, first.query_index);
+  EXPECT_EQ(d.kind, LoopDecision::Kind::kRelease) << d.verdict.detail;
+  EXPECT_TRUE(d.verdict.accepted) << d.verdict.detail;
+  EXPECT_NE(d.verdict.detail.find("tested alone again"), std::string::npos) << d.verdict.detail;
+  EXPECT_EQ(v.heldCount(), 0u);
+}
