@@ -60,6 +60,7 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
   std::lock_guard<std::mutex> lock(mutex_);
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
   if (!held_.empty()) settle();
+  if (!waiting_.empty()) retestWaiting();
   if (!global_pool_.empty() &&
       graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period))
     globalPass();
@@ -208,7 +209,7 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return held_.size() + global_pool_.size();
+  return held_.size() + waiting_.size() + global_pool_.size();
 }
 
 bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const {
@@ -236,26 +237,57 @@ void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict v
 }
 
 void Verifier::drop(const HeldGroup& group, const std::string& why, bool contradicted) {
+  const size_t now = graph_.keyframeCount(), window = static_cast<size_t>(config_.revisit.revisit_window);
   for (const HeldCandidate& h : group) {
-    // A revisit member is tested alone once more before it goes if loops were committed since
-    // it was held (one of its revisit, accepted alone on the fast path, may have closed the
-    // drift that made it fail), unless a released group contradicts it.
-    std::string again;
-    const bool retest = !contradicted && h.kind == HoldKind::kRevisit && h.revision != graph_.revision() &&
-                        graph_.connected(h.query_pos, h.match_pos);
-    if (retest && rule_->retestAlone(h.candidate, h.query_pos, h.match_pos, &again)) {
-      pending_.valid = false;
-      const Status s = commitLocked(h.candidate, true);
-      if (s.ok) {
-        decide(LoopDecision::Kind::kRelease, h.candidate,
-               Verdict::Accept(h.candidate, "its revisit hypothesis was not released (" + why +
-                                                "); tested alone again: " + again));
-        continue;
-      }
+    // A revisit member whose hypothesis failed before any loop was committed since it was held
+    // waits for one (within revisit_window of its arrival) to be tested alone then: a loop of
+    // its revisit accepted alone on the fast path may close the drift that made it fail.
+    if (!contradicted && h.kind == HoldKind::kRevisit && h.revision == graph_.revision() && now <= h.arrived + window &&
+        graph_.connected(h.query_pos, h.match_pos))
+      waiting_.push_back({h, why});
+    else
+      dropMember(h, why, contradicted);
+  }
+}
+
+void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool contradicted) {
+  // A revisit member is tested alone once more before it goes if loops were committed since
+  // it was held (one of its revisit, accepted alone on the fast path, may have closed the
+  // drift that made it fail), unless a released group contradicts it.
+  std::string again;
+  const bool retest = !contradicted && h.kind == HoldKind::kRevisit && h.revision != graph_.revision() &&
+                      graph_.connected(h.query_pos, h.match_pos);
+  if (retest && rule_->retestAlone(h.candidate, h.query_pos, h.match_pos, &again)) {
+    pending_.valid = false;
+    const Status s = commitLocked(h.candidate, true);
+    if (s.ok) {
+      decide(LoopDecision::Kind::kRelease, h.candidate,
+             Verdict::Accept(h.candidate, "its revisit hypothesis was not released (" + why +
+                                              "); tested alone again: " + again));
+      return;
     }
-    if (!addToGlobalPool(h))
-      decide(LoopDecision::Kind::kDrop, h.candidate,
-             Verdict::Reject(Reason::kUnconfirmed, h.candidate, retest ? why + "; tested alone again: " + again : why));
+  }
+  if (!addToGlobalPool(h))
+    decide(LoopDecision::Kind::kDrop, h.candidate,
+           Verdict::Reject(Reason::kUnconfirmed, h.candidate, retest ? why + "; tested alone again: " + again : why));
+}
+
+void Verifier::retestWaiting() {
+  const size_t now = graph_.keyframeCount(), window = static_cast<size_t>(config_.revisit.revisit_window);
+  std::vector<std::pair<HeldCandidate, std::string>> waiting;
+  waiting.swap(waiting_);
+  for (auto& w : waiting) {
+    const HeldCandidate& h = w.first;
+    if (h.revision != graph_.revision()) {
+      dropMember(h, w.second, false);  // tested alone against the graph with the new loops
+    } else if (now > h.arrived + window) {
+      std::ostringstream s;
+      s << w.second << "; no loop was committed within revisit_window=" << window
+        << " keyframes to test it alone again";
+      dropMember(h, s.str(), false);
+    } else {
+      waiting_.push_back(std::move(w));
+    }
   }
 }
 

@@ -154,7 +154,13 @@ class Verifier {
   /// Releases groups that are confirmed, drops those that expired (decisions_).
   void settle();
   void release(const HeldGroup& group);
+  /// Drops a group's members, each tested alone first where loops were committed since it was
+  /// held; a revisit member whose hypothesis failed before any such commit waits (waiting_).
   void drop(const HeldGroup& group, const std::string& why, bool contradicted);
+  void dropMember(const HeldCandidate& h, const std::string& why, bool contradicted);
+  /// On keyframe arrival: a waiting member is tested alone once a loop was committed, dropped
+  /// when revisit_window has passed since it arrived.
+  void retestWaiting();
   /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
   void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
@@ -172,6 +178,9 @@ class Verifier {
   std::unique_ptr<DecisionRule> rule_;
   Pending pending_;
   HeldCandidates held_;
+  /// Revisit members whose hypothesis failed before any loop was committed since they were
+  /// held, with why: tested alone at the next commit within revisit_window (retestWaiting()).
+  std::vector<std::pair<HeldCandidate, std::string>> waiting_;
   std::vector<HeldCandidate> global_pool_;  ///< global_check: oldest first
   size_t last_global_pass_ = 0;             ///< keyframes at the last global pass
   uint64_t global_pool_revision_ = 0;       ///< changes with every change of global_pool_

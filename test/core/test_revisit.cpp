@@ -250,3 +250,67 @@ TEST(RevisitRule, AMemberWhoseRevisitAnotherLoopClosedIsTestedAloneBeforeItIsDro
   EXPECT_NE(d.verdict.detail.find("tested alone again"), std::string::npos) << d.verdict.detail;
   EXPECT_EQ(v.heldCount(), 0u);
 }
+
+namespace {
+
+/// The first three true candidates of lap 2 verified (held as one hypothesis that judge() turns
+/// down: revisit_max_sigma below any prior), then, if `close`, the next three committed as
+/// accepted loops (together, at the last one's keyframe); the decisions of the whole run.
+std::vector<LoopDecision> failedHypothesisThen(bool close, int* held) {
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.revisit.revisit_max_sigma = 0.01;  // every hypothesis fails the judge
+  Verifier v(cfg);
+  std::vector<core::LoopCandidate> trues;
+  for (const sim::SimCandidate& c : s.candidates)
+    if (c.is_true) trues.push_back(c.candidate);
+  const std::vector<core::LoopCandidate> members(trues.begin(), trues.begin() + 3);
+  const std::vector<core::LoopCandidate> closing(trues.begin() + 3, trues.begin() + 6);
+  std::vector<LoopDecision> decisions;
+  *held = 0;
+  for (const sim::SimKeyframe& kf : s.keyframes) {
+    if (!v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok) return {};
+    for (const core::LoopCandidate& c : members)
+      if (kf.index == c.query_index && v.verify(c).deferred) ++*held;
+    if (close && kf.index == closing.back().query_index)
+      for (const core::LoopCandidate& c : closing)
+        if (!v.commit(c).ok) return {};
+    for (const LoopDecision& d : v.takeDecisions()) decisions.push_back(d);
+  }
+  return decisions;
+}
+
+}  // namespace
+
+TEST(RevisitRule, MembersOfAHypothesisThatFailedBeforeAnyCommitAreTestedAloneAtTheNextCommit) {
+  // Inside a real loop_fusion (look-alike world, 0.215 and 0.22 deg/m of yaw drift) the first
+  // three true candidates of lap 2 were held, their hypothesis failed the judge before any loop
+  // was committed, and they were dropped at once; the next candidate then passed alone and
+  // closed the revisit. Such members now wait (within revisit_window) for a commit and are
+  // tested alone against it.
+  int held = 0;
+  const std::vector<LoopDecision> decisions = failedHypothesisThen(true, &held);
+  ASSERT_EQ(held, 3) << "the three members must be held for the test to mean anything";
+  int again = 0;
+  for (const LoopDecision& d : decisions) {
+    EXPECT_EQ(d.verdict.detail.find("no loop was committed"), std::string::npos) << d.verdict.detail;
+    if (d.kind == LoopDecision::Kind::kRelease && d.verdict.detail.find("tested alone again") != std::string::npos) {
+      EXPECT_TRUE(d.verdict.accepted);
+      ++again;
+    }
+  }
+  EXPECT_EQ(again, 3) << "each member, tested alone against the closed revisit, passes";
+}
+
+TEST(RevisitRule, MembersOfAFailedHypothesisWithoutACommitAreDroppedAtRevisitWindow) {
+  int held = 0;
+  const std::vector<LoopDecision> decisions = failedHypothesisThen(false, &held);
+  ASSERT_EQ(held, 3);
+  ASSERT_EQ(decisions.size(), 3u);
+  for (const LoopDecision& d : decisions) {
+    EXPECT_EQ(d.kind, LoopDecision::Kind::kDrop);
+    EXPECT_NE(d.verdict.detail.find("revisit_max_sigma"), std::string::npos) << d.verdict.detail;
+    EXPECT_NE(d.verdict.detail.find("no loop was committed within revisit_window"), std::string::npos)
+        << d.verdict.detail;
+  }
+}
