@@ -99,6 +99,13 @@ double chiSquareQuantile(double p, int dof) {
   return 0.5 * (lo + hi);
 }
 
+std::string probabilityText(double p) {
+  std::ostringstream s;
+  s.precision(12);
+  s << p;
+  return s.str();
+}
+
 double mahalanobis(const Eigen::Vector4d& nu, const Eigen::Matrix4d& S) {
   const Eigen::LLT<Eigen::Matrix4d> llt(0.5 * (S + S.transpose()));
   if (llt.info() != Eigen::Success || !nu.allFinite()) return std::numeric_limits<double>::infinity();
@@ -161,7 +168,7 @@ Check chi2Test(const VerifierConfig& config, const Eigen::Vector4d& nu, const Ei
   s.precision(3);
   s << std::fixed << "innovation " << nu.head<3>().norm() << " m, " << std::abs(nu[3]) * 180.0 / M_PI
     << " deg; Mahalanobis d2 " << n.d2 << (n.d2 <= n.gate ? " <= " : " > ") << n.gate << " (chi2 "
-    << config.chi2.gate_probability << "); relative position std up to " << n.sigma << " m";
+    << probabilityText(config.chi2.gate_probability) << "); relative position std up to " << n.sigma << " m";
   if (!(n.d2 <= n.gate)) return fail(Reason::kInconsistentWithDrift, s.str() + ": more than drift explains");
   if (std::isfinite(n.margin)) s << "; look-alike margin " << n.margin;
   if (!(n.margin >= config.chi2.lookalike_margin)) {

@@ -47,6 +47,10 @@ Check scoreTest(const SolveSummary& trial, double score, double threshold, int w
 /// The chi-square quantile: x with P(chi2_dof <= x) = p, for even dof (2, 4, 6), p in (0, 1).
 double chiSquareQuantile(double p, int dof);
 
+/// A probability as a verdict's detail prints it: every digit that is set (0.999999, not the
+/// 1.000 of the fixed three decimals around it).
+std::string probabilityText(double p);
+
 /// d2 = nu^T S^-1 nu; +inf if S is not positive definite.
 double mahalanobis(const Eigen::Vector4d& nu, const Eigen::Matrix4d& S);
 

@@ -219,7 +219,7 @@ class RevisitRule : public MetricRule {
     std::ostringstream s;
     s.precision(3);
     s << std::fixed << out.check.detail << "; Mahalanobis d2 " << n.d2 << (n.d2 <= reject ? " <= " : " > ") << reject
-      << " (chi2 " << cfg_.revisit.revisit_reject_probability << ", drift scale " << calibration_.scale()
+      << " (chi2 " << probabilityText(cfg_.revisit.revisit_reject_probability) << ", drift scale " << calibration_.scale()
       << "; relative position std up to " << n.sigma << " m)";
     if (!(n.d2 <= reject)) {
       out.check.detail = s.str() + ": no drift explains it";
@@ -285,7 +285,7 @@ class RevisitRule : public MetricRule {
     const auto& median = d2[d2.size() / 2];
     const double gate = chiSquareQuantile(cfg_.revisit.revisit_gate_probability, 4);
     if (!(median.first <= gate)) {
-      s << "median Mahalanobis d2 " << median.first << " > " << gate << " (chi2 " << cfg_.revisit.revisit_gate_probability
+      s << "median Mahalanobis d2 " << median.first << " > " << gate << " (chi2 " << probabilityText(cfg_.revisit.revisit_gate_probability)
         << "): more than drift explains";
       *why = s.str();
       return false;

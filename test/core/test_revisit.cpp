@@ -163,6 +163,9 @@ TEST(RevisitRule, AHypothesisThatContradictsAcceptedLoopsIsDropped) {
         EXPECT_GT(vd.score, vd.threshold) << vd.detail;
         EXPECT_LE(vd.d2, vd.gate) << vd.detail;
         EXPECT_GT(vd.window_size, 1) << vd.detail;
+        // The hold bound's probability as configured (0.999999...), not rounded to "chi2 1.000".
+        EXPECT_NE(vd.detail.find("(chi2 0.999999"), std::string::npos) << vd.detail;
+        EXPECT_EQ(vd.detail.find("(chi2 1.000"), std::string::npos) << vd.detail;
       }
     }
     for (const LoopDecision& d : v.takeDecisions()) decisions.push_back(d);
