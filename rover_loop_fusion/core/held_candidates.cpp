@@ -29,8 +29,30 @@ void HeldCandidates::add(const HeldCandidate& h,
   groups_.push_back({h});
 }
 
+void HeldCandidates::wait(const HeldCandidate& h, const std::string& why) { waiting_.emplace_back(h, why); }
+
+void HeldCandidates::settleWaiting(size_t now, const std::function<uint64_t()>& revision,
+                                   const std::function<void(const HeldCandidate&, const std::string&)>& drop_member) {
+  const size_t window = static_cast<size_t>(config_.revisit.revisit_window);
+  std::vector<std::pair<HeldCandidate, std::string>> waiting;
+  waiting.swap(waiting_);  // drop_member() may make a member wait again
+  for (auto& w : waiting) {
+    const HeldCandidate& h = w.first;
+    if (h.revision != revision()) {
+      drop_member(h, w.second);  // tested alone against the graph with the new loops
+    } else if (now > h.arrived + window) {
+      std::ostringstream s;
+      s << w.second << "; no loop was committed within revisit_window=" << window
+        << " keyframes to test it alone again";
+      drop_member(h, s.str());
+    } else {
+      waiting_.push_back(std::move(w));
+    }
+  }
+}
+
 size_t HeldCandidates::size() const {
-  size_t n = 0;
+  size_t n = waiting_.size();
   for (const HeldGroup& g : groups_) n += g.size();
   return n;
 }

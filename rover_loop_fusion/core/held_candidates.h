@@ -8,7 +8,10 @@
 //               hypothesis of revisit_support members that passes its joint test against the
 //               prior (Actions::judge) and that no rival hypothesis of its stretch competes with
 //               is released; one that fails its test or waits longer than revisit_window is
-//               dropped.
+//               dropped. A member of a dropped hypothesis is tested alone first, on keyframe
+//               arrival, against the loops committed since it was held; until then it waits
+//               (wait(), settleWaiting()): for a commit, up to revisit_window keyframes after its
+//               arrival, or for a keyframe with revisit_retest_budget_ms left.
 //   kGlobal     decision revisit with global_check: rejected for contradicting the graph, held
 //               in the verifier's global pool (not here: core/global_release.cpp) until the global
 //               pass releases it or global_window expires.
@@ -24,6 +27,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace rover_loop_fusion {
@@ -51,8 +55,12 @@ class HeldCandidates {
   /// members lie within confirm_stretch (revisit_stretch) keyframes of it and are `consistent` with it, or starts
   /// a group of its own.
   void add(const HeldCandidate& h, const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent);
+  /// kRevisit: `h`, a member of a dropped hypothesis, waits (with why it was dropped) to be
+  /// tested alone on a later keyframe (settleWaiting()).
+  void wait(const HeldCandidate& h, const std::string& why);
+  /// Held and waiting candidates.
   size_t size() const;
-  bool empty() const { return groups_.empty(); }
+  bool empty() const { return groups_.empty() && waiting_.empty(); }
 
   /// What settle() asks the verifier to do with a group it has taken out.
   struct Actions {
@@ -77,6 +85,13 @@ class HeldCandidates {
   /// (dropped); after an action that may change the graph it looks at the rest again.
   void settle(size_t now, const Actions& act);
 
+  /// Gives each waiting member, oldest first and once, to `drop_member` (which tests it alone,
+  /// or makes it wait again) once a loop was committed since it was held (`revision()`, the
+  /// graph's revision now, differs from its own), or when revisit_window has passed since it
+  /// arrived (why says so); the others go on waiting.
+  void settleWaiting(size_t now, const std::function<uint64_t()>& revision,
+                     const std::function<void(const HeldCandidate&, const std::string& why)>& drop_member);
+
  private:
   /// decision revisit: settles the kRevisit group at `i`; true if it acted (the group is gone).
   bool settleRevisit(size_t i, const Actions& act);
@@ -85,6 +100,8 @@ class HeldCandidates {
                        const std::function<bool(const HeldGroup&, const HeldGroup&)>& contradicts);
   const VerifierConfig& config_;
   std::vector<HeldGroup> groups_;  ///< by revisit, oldest first
+  /// Members of dropped revisit hypotheses waiting to be tested alone, with why, oldest first.
+  std::vector<std::pair<HeldCandidate, std::string>> waiting_;
   size_t now_ = 0;                 ///< keyframes at the settle() running
 };
 

@@ -59,8 +59,17 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
                              const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance) {
   std::lock_guard<std::mutex> lock(mutex_);
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
-  if (!held_.empty()) settle();
-  if (!waiting_.empty()) retestWaiting();
+  // Re-tests of dropped revisit members run here, on keyframe arrival, within
+  // revisit_retest_budget_ms counted from it (retestNow()); in verify() they wait for a keyframe.
+  retest_.on_keyframe = true;
+  retest_.started = Clock::now();
+  retest_.count = 0;
+  if (!held_.empty()) {
+    settle();
+    held_.settleWaiting(graph_.keyframeCount(), [this] { return graph_.revision(); },
+                        [this](const HeldCandidate& h, const std::string& why) { dropMember(h, why, false); });
+  }
+  retest_.on_keyframe = false;
   if (!global_pool_.empty() &&
       graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period))
     globalPass();
@@ -70,6 +79,7 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
 Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
+  retest_.on_keyframe = false;  // re-tests wait for a keyframe (retestNow())
   Verdict measured;  // the numbers gathered on the way to the decision
   measured.threshold = config_.metric.threshold;
   auto reject = [&](Reason reason, std::string detail) {
@@ -209,7 +219,7 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return held_.size() + waiting_.size() + global_pool_.size();
+  return held_.size() + global_pool_.size();
 }
 
 bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const {
@@ -244,7 +254,7 @@ void Verifier::drop(const HeldGroup& group, const std::string& why, bool contrad
     // its revisit accepted alone on the fast path may close the drift that made it fail.
     if (!contradicted && h.kind == HoldKind::kRevisit && h.revision == graph_.revision() && now <= h.arrived + window &&
         graph_.connected(h.query_pos, h.match_pos))
-      waiting_.push_back({h, why});
+      held_.wait(h, why);
     else
       dropMember(h, why, contradicted);
   }
@@ -257,6 +267,11 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
   std::string again;
   const bool retest = !contradicted && h.kind == HoldKind::kRevisit && h.revision != graph_.revision() &&
                       graph_.connected(h.query_pos, h.match_pos);
+  if (retest && !retestNow()) {
+    held_.wait(h, why);  // tested alone on the next keyframe's arrival (settleWaiting())
+    return;
+  }
+  if (retest) ++retest_.count;
   if (retest && rule_->retestAlone(h.candidate, h.query_pos, h.match_pos, &again)) {
     pending_.valid = false;
     const Status s = commitLocked(h.candidate, true);
@@ -272,23 +287,13 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
            Verdict::Reject(Reason::kUnconfirmed, h.candidate, retest ? why + "; tested alone again: " + again : why));
 }
 
-void Verifier::retestWaiting() {
-  const size_t now = graph_.keyframeCount(), window = static_cast<size_t>(config_.revisit.revisit_window);
-  std::vector<std::pair<HeldCandidate, std::string>> waiting;
-  waiting.swap(waiting_);
-  for (auto& w : waiting) {
-    const HeldCandidate& h = w.first;
-    if (h.revision != graph_.revision()) {
-      dropMember(h, w.second, false);  // tested alone against the graph with the new loops
-    } else if (now > h.arrived + window) {
-      std::ostringstream s;
-      s << w.second << "; no loop was committed within revisit_window=" << window
-        << " keyframes to test it alone again";
-      dropMember(h, s.str(), false);
-    } else {
-      waiting_.push_back(std::move(w));
-    }
-  }
+bool Verifier::retestNow() const {
+  // On keyframe arrival, while the keyframe's work is within revisit_retest_budget_ms; the first
+  // re-test of a keyframe always runs (each is bounded by time_budget_ms itself), so every
+  // waiting member is tested in turn however busy the keyframes are.
+  if (!retest_.on_keyframe) return false;
+  const double budget = config_.trial.time_budget_ms > 0 ? config_.revisit.revisit_retest_budget_ms : 0.0;
+  return retest_.count == 0 || budget <= 0 || msSince(retest_.started) < budget;
 }
 
 void Verifier::settle() {

@@ -155,12 +155,13 @@ class Verifier {
   void settle();
   void release(const HeldGroup& group);
   /// Drops a group's members, each tested alone first where loops were committed since it was
-  /// held; a revisit member whose hypothesis failed before any such commit waits (waiting_).
+  /// held; a revisit member whose hypothesis failed before any such commit waits (HeldCandidates::wait()).
   void drop(const HeldGroup& group, const std::string& why, bool contradicted);
   void dropMember(const HeldCandidate& h, const std::string& why, bool contradicted);
-  /// On keyframe arrival: a waiting member is tested alone once a loop was committed, dropped
-  /// when revisit_window has passed since it arrived.
-  void retestWaiting();
+  /// Whether a dropped revisit member is tested alone now (else it waits for the next
+  /// keyframe): only on keyframe arrival, and there while revisit_retest_budget_ms, counted
+  /// from the arrival, is not spent (at least one re-test per keyframe).
+  bool retestNow() const;
   /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
   void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
@@ -178,9 +179,13 @@ class Verifier {
   std::unique_ptr<DecisionRule> rule_;
   Pending pending_;
   HeldCandidates held_;
-  /// Revisit members whose hypothesis failed before any loop was committed since they were
-  /// held, with why: tested alone at the next commit within revisit_window (retestWaiting()).
-  std::vector<std::pair<HeldCandidate, std::string>> waiting_;
+  /// The re-tests of the addKeyframe() running (retestNow()).
+  struct RetestBudget {
+    bool on_keyframe = false;  ///< inside addKeyframe()
+    std::chrono::steady_clock::time_point started;
+    size_t count = 0;  ///< re-tests run on this keyframe
+  };
+  RetestBudget retest_;
   std::vector<HeldCandidate> global_pool_;  ///< global_check: oldest first
   size_t last_global_pass_ = 0;             ///< keyframes at the last global pass
   uint64_t global_pool_revision_ = 0;       ///< changes with every change of global_pool_

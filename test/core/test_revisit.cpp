@@ -258,11 +258,19 @@ namespace {
 
 /// The first three true candidates of lap 2 verified (held as one hypothesis that judge() turns
 /// down: revisit_max_sigma below any prior), then, if `close`, the next three committed as
-/// accepted loops (together, at the last one's keyframe); the decisions of the whole run.
-std::vector<LoopDecision> failedHypothesisThen(bool close, int* held) {
+/// accepted loops (together, at the last one's keyframe); the decisions of the whole run (in
+/// *at, if given, the keyframe whose arrival or verification each came out of). A
+/// `retest_budget_ms` above 0 bounds the re-tests per keyframe (time_budget_ms then on too,
+/// but far above any trial).
+std::vector<LoopDecision> failedHypothesisThen(bool close, int* held, double retest_budget_ms = 0.0,
+                                               std::vector<int64_t>* at = nullptr) {
   const sim::Scene s = sim::makeLapsScene(drifting());
   core::VerifierConfig cfg = config(core::Decision::kRevisit);
   cfg.revisit.revisit_max_sigma = 0.01;  // every hypothesis fails the judge
+  if (retest_budget_ms > 0) {
+    cfg.trial.time_budget_ms = 60000.0;
+    cfg.revisit.revisit_retest_budget_ms = retest_budget_ms;
+  }
   Verifier v(cfg);
   std::vector<core::LoopCandidate> trues;
   for (const sim::SimCandidate& c : s.candidates)
@@ -278,7 +286,10 @@ std::vector<LoopDecision> failedHypothesisThen(bool close, int* held) {
     if (close && kf.index == closing.back().query_index)
       for (const core::LoopCandidate& c : closing)
         if (!v.commit(c).ok) return {};
-    for (const LoopDecision& d : v.takeDecisions()) decisions.push_back(d);
+    for (const LoopDecision& d : v.takeDecisions()) {
+      decisions.push_back(d);
+      if (at) at->push_back(kf.index);
+    }
   }
   return decisions;
 }
@@ -315,5 +326,27 @@ TEST(RevisitRule, MembersOfAFailedHypothesisWithoutACommitAreDroppedAtRevisitWin
     EXPECT_NE(d.verdict.detail.find("revisit_max_sigma"), std::string::npos) << d.verdict.detail;
     EXPECT_NE(d.verdict.detail.find("no loop was committed within revisit_window"), std::string::npos)
         << d.verdict.detail;
+  }
+}
+
+TEST(RevisitRule, ReTestsOfOneKeyframeShareRevisitRetestBudgetTheRestWaitForTheNextKeyframes) {
+  // The three waiting members are due at the same commit. Without a bound they are tested on
+  // one keyframe's arrival; with revisit_retest_budget_ms spent by the first re-test, one is
+  // tested per keyframe, in turn, and each is still taken.
+  int held = 0;
+  std::vector<int64_t> unbounded_at, bounded_at;
+  const std::vector<LoopDecision> unbounded = failedHypothesisThen(true, &held, 0.0, &unbounded_at);
+  ASSERT_EQ(held, 3);
+  const std::vector<LoopDecision> bounded = failedHypothesisThen(true, &held, 1e-3, &bounded_at);
+  ASSERT_EQ(held, 3);
+  ASSERT_EQ(unbounded.size(), 3u);
+  ASSERT_EQ(bounded.size(), 3u);
+  EXPECT_EQ(unbounded_at[0], unbounded_at[2]) << "without a bound the three are tested on one keyframe";
+  EXPECT_EQ(bounded_at[0], unbounded_at[0]) << "the first re-test runs on the same keyframe";
+  for (size_t i = 1; i < bounded_at.size(); ++i)
+    EXPECT_EQ(bounded_at[i], bounded_at[i - 1] + 1) << "one re-test per keyframe once the budget is spent";
+  for (const LoopDecision& d : bounded) {
+    EXPECT_EQ(d.kind, LoopDecision::Kind::kRelease) << d.verdict.detail;
+    EXPECT_NE(d.verdict.detail.find("tested alone again"), std::string::npos) << d.verdict.detail;
   }
 }
