@@ -73,7 +73,7 @@ void HeldCandidates::releaseDropping(size_t i, const Actions& act, const std::st
   }
 }
 
-void HeldCandidates::settle(size_t now, const Actions& act) {
+void HeldCandidates::settle(size_t now, const Actions& act, bool revisit) {
   now_ = now;
   const size_t k = static_cast<size_t>(config_.hold.confirm_count);
   const size_t window = static_cast<size_t>(config_.hold.confirm_window);    // expiry
@@ -81,7 +81,7 @@ void HeldCandidates::settle(size_t now, const Actions& act) {
   for (size_t i = 0; i < groups_.size();) {
     HeldGroup& g = groups_[i];
     if (g.front().kind == HoldKind::kRevisit) {
-      if (settleRevisit(i, act)) {
+      if (revisit && settleRevisit(i, act)) {
         i = 0;  // the graph may have changed
         continue;
       }

@@ -82,8 +82,9 @@ class HeldCandidates {
   };
   /// Acts on every group that is due at `now` keyframes: confirmed groups (released, or rivals
   /// settled), rival groups too small to block a released one (dropped), expired groups
-  /// (dropped); after an action that may change the graph it looks at the rest again.
-  void settle(size_t now, const Actions& act);
+  /// (dropped); after an action that may change the graph it looks at the rest again. The
+  /// revisit hypotheses (kRevisit) only if `revisit`.
+  void settle(size_t now, const Actions& act, bool revisit);
 
   /// Gives each waiting member, oldest first and once, to `drop_member` (which tests it alone,
   /// or makes it wait again) once a loop was committed since it was held (`revision()`, the

@@ -65,7 +65,7 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
   retest_.started = Clock::now();
   retest_.count = 0;
   if (!held_.empty()) {
-    settle();
+    settle(true);
     held_.settleWaiting(graph_.keyframeCount(), [this] { return graph_.revision(); },
                         [this](const HeldCandidate& h, const std::string& why) { dropMember(h, why, false); });
   }
@@ -235,7 +235,7 @@ void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind k
   held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
   // A revisit hypothesis is judged on keyframe arrival (addKeyframe), not here: its joint trial
   // (all its loops) would otherwise land on this verify()'s time (issue 20).
-  if (kind != HoldKind::kRevisit) settle();
+  if (kind != HoldKind::kRevisit) settle(false);
 }
 
 void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict) {
@@ -296,7 +296,7 @@ bool Verifier::retestNow() const {
   return retest_.count == 0 || budget <= 0 || msSince(retest_.started) < budget;
 }
 
-void Verifier::settle() {
+void Verifier::settle(bool revisit) {
   HeldCandidates::Actions act;
   act.rival_targets = [this](const HeldGroup& g) { return rivalTargets(g); };
   act.settle_rivals = [this](const HeldGroup& g, const std::vector<LoopCandidate>& loops) { settleRivals(g, loops); };
@@ -304,7 +304,7 @@ void Verifier::settle() {
   act.drop = [this](const HeldGroup& g, const std::string& why, bool contradicted) { drop(g, why, contradicted); };
   act.judge = [this](const HeldGroup& g, std::string* why) { return judgeRevisit(g, why); };
   act.misfit = [this](const HeldGroup& g) { return rule_->misfit(g); };
-  held_.settle(graph_.keyframeCount(), act);
+  held_.settle(graph_.keyframeCount(), act, revisit);
 }
 
 bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {

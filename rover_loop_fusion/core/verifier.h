@@ -151,8 +151,9 @@ class Verifier {
   /// global_check: the global pass over the pool (every global_period keyframes): releases the
   /// inliers the other loops pin down, drops what waited longer than global_window.
   void globalPass();
-  /// Releases groups that are confirmed, drops those that expired (decisions_).
-  void settle();
+  /// Releases groups that are confirmed, drops those that expired (decisions_); the revisit
+  /// hypotheses too if `revisit` (on keyframe arrival only: their joint trials).
+  void settle(bool revisit);
   void release(const HeldGroup& group);
   /// Drops a group's members, each tested alone first where loops were committed since it was
   /// held; a revisit member whose hypothesis failed before any such commit waits (HeldCandidates::wait()).

@@ -350,3 +350,57 @@ TEST(RevisitRule, ReTestsOfOneKeyframeShareRevisitRetestBudgetTheRestWaitForTheN
     EXPECT_NE(d.verdict.detail.find("tested alone again"), std::string::npos) << d.verdict.detail;
   }
 }
+
+TEST(RevisitRule, AHypothesisIsJudgedOnKeyframeArrivalNotInsideAVerificationThatHoldsAnotherKind) {
+  // A verification that holds a candidate of another kind (here one between unconnected
+  // sequences, relocalisation "confirm") settles the held groups; the revisit hypotheses'
+  // joint trials are left to the next keyframe's arrival (they would land on that verify()'s
+  // time). The scene: a stub of 5 keyframes (sequence 1), then the drifting laps (sequence 2).
+  const sim::Scene s = sim::makeLapsScene(drifting());
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.host.confirm_without_prior = true;
+  Verifier v(cfg);
+  const int64_t offset = 10;  // the laps' indices after the stub's
+  const double stamp0 = s.keyframes.front().stamp;
+  for (int64_t i = 0; i < 5; ++i)
+    ASSERT_TRUE(v.addKeyframe(i, stamp0 - 10.0 + i, 1, Eigen::Vector3d(100.0 + i, 50.0, 0.0),
+                              Eigen::Quaterniond::Identity()).ok);
+  std::vector<core::LoopCandidate> trues;
+  for (const sim::SimCandidate& c : s.candidates) {
+    if (!c.is_true) continue;
+    core::LoopCandidate l = c.candidate;
+    l.query_index += offset;
+    l.match_index += offset;
+    trues.push_back(l);
+  }
+  int held = 0;
+  bool probed = false, released_in_verify = false, released_on_keyframe = false;
+  size_t next = 0;
+  for (const sim::SimKeyframe& kf : s.keyframes) {
+    ASSERT_TRUE(v.addKeyframe(kf.index + offset, kf.stamp, 2, kf.vio.t, kf.vio.q).ok);
+    for (const LoopDecision& d : v.takeDecisions())
+      if (probed && d.kind == LoopDecision::Kind::kRelease &&
+          d.verdict.detail.find("revisit hypothesis") != std::string::npos)
+        released_on_keyframe = true;
+    if (probed) break;
+    for (; next < trues.size() && trues[next].query_index == kf.index + offset; ++next) {
+      const Verdict vd = v.verify(trues[next]);
+      if (vd.accepted) {
+        ASSERT_TRUE(v.commit(trues[next]).ok);
+      }
+      if (vd.deferred) ++held;
+    }
+    if (held == cfg.revisit.revisit_support && !probed) {
+      core::LoopCandidate across = trues[next - 1];
+      across.match_index = 2;  // the stub: no trajectory prior
+      const Verdict vd = v.verify(across);
+      ASSERT_TRUE(vd.deferred) << vd.detail;
+      for (const LoopDecision& d : v.takeDecisions())
+        if (d.kind == LoopDecision::Kind::kRelease) released_in_verify = true;
+      probed = true;
+    }
+  }
+  ASSERT_TRUE(probed) << "revisit_support members must be held for the test to mean anything";
+  EXPECT_FALSE(released_in_verify) << "no hypothesis judged inside verify()";
+  EXPECT_TRUE(released_on_keyframe) << "the hypothesis is released on the next keyframe's arrival";
+}
