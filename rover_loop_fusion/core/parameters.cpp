@@ -251,7 +251,8 @@ std::vector<Parameter> makeTable() {
                      "a hypothesis is released only if its misfit is lower than every rival's by this"));
   t.push_back(number("revisit_retest_budget_ms", "ms", FIELD(revisit.revisit_retest_budget_ms), 0.0, 60000.0, false,
                      "what the re-tests of dropped revisit members may spend together on one keyframe's "
-                     "arrival; the rest wait for the next keyframe (one runs per keyframe at least); 0 (or time_budget_ms 0): no bound"));
+                     "arrival; the rest wait for the next keyframe (one runs per keyframe at least); "
+                     "0 (or time_budget_ms 0): no bound"));
   // decision revisit's global pass (core/global_pass.cpp, Verifier::globalPass).
   t.push_back(boolean("global_check", FIELD(global.global_check),
                       "hold what the per-candidate test rejects for contradicting the graph and release "

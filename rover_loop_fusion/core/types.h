@@ -394,10 +394,9 @@ struct RevisitConfig {
   double revisit_margin = 4.0;
   /// What the re-tests of dropped revisit members (each a trial, bounded by time_budget_ms) may
   /// spend together on one keyframe's arrival [ms] (counted from the arrival, the hypotheses'
-  /// judges included): once it is spent, the members still due wait
-  /// for the next keyframe (at least one re-test runs per keyframe). Re-tests never run inside
-  /// verify(): a member dropped there waits for the next keyframe too. 0, or time_budget_ms 0
-  /// (verdicts independent of the machine's load): no bound.
+  /// judges included): once it is spent, the members still due wait for the next keyframe (at
+  /// least one re-test runs per keyframe). Judges and re-tests never run inside verify().
+  /// 0, or time_budget_ms 0 (verdicts independent of the machine's load): no bound.
   double revisit_retest_budget_ms = 200.0;
 };
 
