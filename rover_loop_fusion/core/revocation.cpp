@@ -29,11 +29,13 @@ HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
   return h;
 }
 
-std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window) const {
+std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window, bool near_matches) const {
   const size_t first = h.query_pos > window ? h.query_pos - window : 0;
   std::vector<LoopCandidate> out;
   for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
     const HeldCandidate a = heldFor(l);
+    if (near_matches && (a.match_pos > h.match_pos ? a.match_pos - h.match_pos : h.match_pos - a.match_pos) > window)
+      continue;
     // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
     if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) &&
         cycleTest(graph_, config_, rule_->driftScale(), a, h, true) == 0)

@@ -309,11 +309,15 @@ void Verifier::settle(bool revisit) {
 
 bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
   // A hypothesis that contradicts accepted loops of its stretch is not released: the accepted
-  // loops passed alone or with their own revisit, and a look-alike row contradicts them.
+  // loops passed alone or with their own revisit, and a look-alike row contradicts them. Only
+  // loops whose matches lie within the stretch too: where a revisit's matches jump across the
+  // start of a loop run (lap 3's first loops match lap 1's start, lap 2's last its end), the
+  // VIO odometry between the matches is a whole lap, whose drift the model underrates; found
+  // inside loop_fusion, where it kept a third lap from closing (docs/vins-fusion.md).
   size_t contradicting = 0;
   LoopCandidate example;
   for (const HeldCandidate& h : group) {
-    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit.revisit_stretch));
+    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit.revisit_stretch), true);
     if (!against.empty()) {
       ++contradicting;
       example = against.front();

@@ -129,7 +129,9 @@ class Verifier {
   bool holdAsRival(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
   /// The accepted loops of the stretch of `h` (queries within `window` keyframes) that the
   /// cycle test (along the VIO odometry) finds inconsistent with it.
-  std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window) const;
+  /// With `near_matches`, only loops whose match also lies within `window` keyframes of h's:
+  /// the cycle test's odometry legs are then both short, as its covariance assumes.
+  std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window, bool near_matches = false) const;
   /// decision revisit: the joint test of a hypothesis (Actions::judge): it must not contradict
   /// the accepted loops of its stretch, and must pass the rule's test against the prior.
   bool judgeRevisit(const HeldGroup& group, std::string* why);
