@@ -59,17 +59,15 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
                              const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance) {
   std::lock_guard<std::mutex> lock(mutex_);
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
-  // Re-tests of dropped revisit members run here, on keyframe arrival, within
-  // revisit_retest_budget_ms counted from it (retestNow()); in verify() they wait for a keyframe.
-  retest_.on_keyframe = true;
-  retest_.started = Clock::now();
-  retest_.count = 0;
+  // The revisit hypotheses are judged, and dropped members re-tested, here only: on keyframe
+  // arrival, the re-tests within revisit_retest_budget_ms counted from it (retestNow()).
   if (!held_.empty()) {
+    retest_.started = Clock::now();
+    retest_.count = 0;
     settle(true);
     held_.settleWaiting(graph_.keyframeCount(), [this] { return graph_.revision(); },
                         [this](const HeldCandidate& h, const std::string& why) { dropMember(h, why, false); });
   }
-  retest_.on_keyframe = false;
   if (!global_pool_.empty() &&
       graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period))
     globalPass();
@@ -79,7 +77,6 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
 Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
-  retest_.on_keyframe = false;  // re-tests wait for a keyframe (retestNow())
   Verdict measured;  // the numbers gathered on the way to the decision
   measured.threshold = config_.metric.threshold;
   auto reject = [&](Reason reason, std::string detail) {
@@ -288,10 +285,10 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
 }
 
 bool Verifier::retestNow() const {
-  // On keyframe arrival, while the keyframe's work is within revisit_retest_budget_ms; the first
-  // re-test of a keyframe always runs (each is bounded by time_budget_ms itself), so every
-  // waiting member is tested in turn however busy the keyframes are.
-  if (!retest_.on_keyframe) return false;
+  // Called on keyframe arrival only (settle(true), settleWaiting()). While the keyframe's work is
+  // within revisit_retest_budget_ms; the first re-test of a keyframe always runs (each is bounded
+  // by time_budget_ms itself), so every waiting member is tested in turn however busy the
+  // keyframes are.
   const double budget = config_.trial.time_budget_ms > 0 ? config_.revisit.revisit_retest_budget_ms : 0.0;
   return retest_.count == 0 || budget <= 0 || msSince(retest_.started) < budget;
 }

@@ -162,8 +162,8 @@ class Verifier {
   void drop(const HeldGroup& group, const std::string& why, bool contradicted);
   void dropMember(const HeldCandidate& h, const std::string& why, bool contradicted);
   /// Whether a dropped revisit member is tested alone now (else it waits for the next
-  /// keyframe): only on keyframe arrival, and there while revisit_retest_budget_ms, counted
-  /// from the arrival, is not spent (at least one re-test per keyframe).
+  /// keyframe): while revisit_retest_budget_ms, counted from the keyframe's arrival, is not
+  /// spent (at least one re-test per keyframe). Revisit members are dropped on keyframe arrival only.
   bool retestNow() const;
   /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
@@ -184,7 +184,6 @@ class Verifier {
   HeldCandidates held_;
   /// The re-tests of the addKeyframe() running (retestNow()).
   struct RetestBudget {
-    bool on_keyframe = false;  ///< inside addKeyframe()
     std::chrono::steady_clock::time_point started;
     size_t count = 0;  ///< re-tests run on this keyframe
   };
