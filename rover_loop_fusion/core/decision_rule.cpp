@@ -53,8 +53,9 @@ class MetricRule : public DecisionRule {
   KeyframeGraph& graph_;
 };
 
-/// A variance scale of the drift model fitted to what accepted loops said about the drift
-/// (calibrate_drift): robust maximum likelihood over a log grid.
+/// A variance scale of the drift model fitted to what accepted loops said about the drift:
+/// robust maximum likelihood over a log grid. calibrate_drift applies it to the model
+/// (scale()); the revisit judge reads it for its bound (observed(), revisit_observed_drift).
 class DriftCalibration {
  public:
   DriftCalibration(const VerifierConfig& config, const KeyframeGraph& graph, double initial)
@@ -63,7 +64,17 @@ class DriftCalibration {
 
   void add(const Eigen::Vector4d& innovation, const Eigen::Matrix4d& chain_covariance) {
     samples_.push_back({innovation, chain_covariance});
-    if (config_.drift.calibrate_drift) refit();
+    if (config_.drift.calibrate_drift) scale_ = fit(scale_);
+  }
+
+  /// The scale the accepted loops' innovations ask for relative to the one in use (1 with
+  /// calibrate_drift off); fitted when asked, once per new sample; 1 before kMinLoops loops.
+  double observed() {
+    if (observed_samples_ != samples_.size()) {
+      observed_ = fit(scale_) / scale_;
+      observed_samples_ = samples_.size();
+    }
+    return observed_;
   }
 
  private:
@@ -72,15 +83,15 @@ class DriftCalibration {
     Eigen::Matrix4d chain_covariance;
   };
 
-  void refit() {
+  double fit(double start) const {
     // Robust maximum likelihood of one variance scale s of the drift model: each accepted loop's
     // innovation nu ~ N(0, s C + L) (C: its chain covariance at scale 1, L: the loop's), Huber
     // on sqrt(d2) (an accepted look-alike cannot drag s far), over a log grid of s.
     const size_t kMinLoops = 5, kWindow = 200;
-    if (samples_.size() < kMinLoops) return;
+    if (samples_.size() < kMinLoops) return start;
     const size_t first = samples_.size() > kWindow ? samples_.size() - kWindow : 0;
     const Eigen::Matrix4d L = graph_.loopCovariance();
-    double best = scale_, best_nll = std::numeric_limits<double>::infinity();
+    double best = start, best_nll = std::numeric_limits<double>::infinity();
     for (int k = 0; k <= 80; ++k) {
       const double s = std::exp(std::log(0.01) + k * (std::log(100.0) - std::log(0.01)) / 80.0);
       double nll = 0.0;
@@ -99,13 +110,15 @@ class DriftCalibration {
         best = s;
       }
     }
-    scale_ = best;
+    return best;
   }
 
   const VerifierConfig& config_;
   const KeyframeGraph& graph_;
   double scale_;
   std::vector<Sample> samples_;
+  double observed_ = 1.0;
+  size_t observed_samples_ = 0;
 };
 
 /// In units of drift: the covariance of the relative pose through the condensed graph, the
@@ -252,25 +265,21 @@ class RevisitRule : public MetricRule {
   double driftScale() const override { return calibration_.scale(); }
 
   double misfit(const HeldGroup& group) override {
-    std::vector<std::pair<double, const HeldCandidate*>> d2;
-    double sigma = 0.0;
-    members(group, &d2, &sigma);
-    if (d2.empty()) return std::numeric_limits<double>::infinity();
-    std::nth_element(d2.begin(), d2.begin() + d2.size() / 2, d2.end());
-    return d2[d2.size() / 2].first;
+    Members m = members(group);
+    if (m.d2.empty()) return std::numeric_limits<double>::infinity();
+    return median(&m.d2).first;
   }
 
   bool judge(const HeldGroup& group, std::string* why) override {
     // Each member against the prior as it is now; the hypothesis' fit is the median member's.
-    std::vector<std::pair<double, const HeldCandidate*>> d2;
-    double sigma = 0.0;
-    members(group, &d2, &sigma);
+    Members m = members(group);
+    const double sigma = m.sigma;
     std::ostringstream s;
     s.precision(3);
     s << std::fixed << "revisit hypothesis of " << group.size() << " (loops " << group.front().candidate.query_index
       << "->" << group.front().candidate.match_index << " .. " << group.back().candidate.query_index << "->"
       << group.back().candidate.match_index << "): ";
-    if (d2.size() < static_cast<size_t>(cfg_.revisit.revisit_support)) {
+    if (m.d2.size() < static_cast<size_t>(cfg_.revisit.revisit_support)) {
       s << "fewer than revisit_support members have a prior now";
       *why = s.str();
       return false;
@@ -281,44 +290,82 @@ class RevisitRule : public MetricRule {
       *why = s.str();
       return false;
     }
-    std::nth_element(d2.begin(), d2.begin() + d2.size() / 2, d2.end());
-    const auto& median = d2[d2.size() / 2];
+    const double median_d2 = median(&m.d2).first;
     const double gate = chiSquareQuantile(cfg_.revisit.revisit_gate_probability, 4);
-    if (!(median.first <= gate)) {
-      s << "median Mahalanobis d2 " << median.first << " > " << gate << " (chi2 " << probabilityText(cfg_.revisit.revisit_gate_probability)
+    if (!(median_d2 <= gate)) {
+      s << "median Mahalanobis d2 " << median_d2 << " > " << gate << " (chi2 " << probabilityText(cfg_.revisit.revisit_gate_probability)
         << "): more than drift explains";
       *why = s.str();
       return false;
     }
     // The trial with all its loops: how far the trajectory has to bend for this revisit.
     std::vector<LoopCandidate> loops;
-    for (const auto& d : d2) loops.push_back(d.second->candidate);
+    for (const auto& d : m.d2) loops.push_back(d.second->candidate);
     const TrialSolution trial = g_.solveWindow(loops, cfg_.trial.robust_candidate, cfg_.trial.max_iterations, 0.0);
     Eigen::Matrix3Xd before, after;
     const int n = g_.scoredPositions(trial, &before, &after);
     const double score = trial.summary.finite ? deformationScore(before, after, cfg_.alignment)
                                               : std::numeric_limits<double>::quiet_NaN();
-    const double bound = std::max(cfg_.metric.threshold, cfg_.revisit.revisit_score_sigmas * sigma);
-    s << "median d2 " << median.first << " <= " << gate << "; trial with its " << loops.size() << " loops: score "
-      << score << " m over " << n
-      << " keyframes, bound " << bound << " m (max of threshold and " << cfg_.revisit.revisit_score_sigmas << " x std "
-      << sigma << " m)";
+    double bound = std::max(cfg_.metric.threshold, cfg_.revisit.revisit_score_sigmas * sigma);
+    s << "median d2 " << median_d2 << " <= " << gate << "; trial with its " << loops.size() << " loops: score "
+      << score << " m over " << n << " keyframes, bound ";
+    std::ostringstream b;
+    b.precision(3);
+    b << std::fixed << "(max of threshold and " << cfg_.revisit.revisit_score_sigmas << " x std " << sigma << " m";
+    if (!(score <= bound) && cfg_.revisit.revisit_observed_drift) {
+      // The drift model's std may be the VIO's or not; the accepted loops tell (the lab's third
+      // lap: 0.226 m against 0.65 x 0.138 m, docs/vins-fusion.md). Only where the prior tells
+      // the place from a look-alike a known spacing away: a row of look-alikes fits as well as
+      // a third lap by score and d2 (warehouse_s0.1: 0.24 m, d2 7-11; docs/design-notes.md).
+      const double observed = calibration_.observed();
+      const double lookalike = median(&m.margin).first;
+      if (observed > 1.0 && std::isfinite(lookalike) && lookalike >= cfg_.chi2.lookalike_margin) {
+        bound = std::max(cfg_.metric.threshold, cfg_.revisit.revisit_score_sigmas * sigma * std::sqrt(observed));
+        b << " x sqrt(" << observed << "), the drift scale the accepted loops show)";
+      } else {
+        b << "; the accepted loops show drift scale " << observed;
+        if (observed > 1.0 && !std::isfinite(lookalike))
+          b << ", not applied: no look-alike spacing is set (lookalike_distance, lookalike_distance_vertical 0), so "
+               "nothing tells the place from a row of look-alikes";
+        else if (observed > 1.0)
+          b << ", not applied: a look-alike explains the median member as well (margin " << lookalike << " < "
+            << cfg_.chi2.lookalike_margin << ")";
+        b << ")";
+      }
+    } else {
+      b << ")";
+    }
+    s << bound << " m " << b.str();
     *why = s.str();
     return trial.summary.converged && trial.summary.finite && score <= bound;
   }
 
  private:
-  /// The members with a prior now: their d2 (and the member), the largest position std.
-  void members(const HeldGroup& group, std::vector<std::pair<double, const HeldCandidate*>>* d2, double* sigma) const {
+  /// The members with a prior now: their d2 (and the member), look-alike margins, the largest
+  /// position std.
+  struct Members {
+    std::vector<std::pair<double, const HeldCandidate*>> d2;
+    std::vector<std::pair<double, const HeldCandidate*>> margin;
+    double sigma = 0.0;
+  };
+  Members members(const HeldGroup& group) const {
+    Members m;
     for (const HeldCandidate& h : group) {
       Eigen::Vector4d nu;
       Eigen::Matrix4d C;
       if (!g_.connected(h.query_pos, h.match_pos) || !drift(h.candidate, h.query_pos, h.match_pos, &nu, &C)) continue;
       Chi2Numbers n;
       chi2Test(cfg_, nu, C + g_.loopCovariance(), &n);
-      d2->push_back({n.d2, &h});
-      *sigma = std::max(*sigma, n.sigma);
+      m.d2.push_back({n.d2, &h});
+      m.margin.push_back({n.margin, &h});
+      m.sigma = std::max(m.sigma, n.sigma);
     }
+    return m;
+  }
+  /// The median (upper, for an even count) by value; v not empty, reordered.
+  static std::pair<double, const HeldCandidate*> median(std::vector<std::pair<double, const HeldCandidate*>>* v) {
+    std::nth_element(v->begin(), v->begin() + v->size() / 2, v->end());
+    return (*v)[v->size() / 2];
   }
 
   bool drift(const LoopCandidate& c, size_t qpos, size_t mpos, Eigen::Vector4d* nu, Eigen::Matrix4d* C) const {

@@ -244,6 +244,9 @@ std::vector<Parameter> makeTable() {
   t.push_back(number("revisit_score_sigmas", "", FIELD(revisit.revisit_score_sigmas), 0.0, 100.0, false,
                      "a hypothesis' trial score must be at most max(threshold, this x the relative "
                      "position's largest standard deviation)"));
+  t.push_back(boolean("revisit_observed_drift", FIELD(revisit.revisit_observed_drift),
+                      "that standard deviation scaled to the drift the accepted loops have shown (never "
+                      "below the model's), unless a look-alike explains the hypothesis as well as the place"));
   t.push_back(number("revisit_member_weight", "", FIELD(revisit.revisit_member_weight), 0.0, 100.0, false,
                      "what each member beyond the first takes off a hypothesis' misfit (its median "
                      "Mahalanobis distance) when rivals compete"));

@@ -386,6 +386,12 @@ struct RevisitConfig {
   /// The hypothesis' trial: its deformation score must be at most
   /// max(threshold, revisit_score_sigmas x the relative position's largest standard deviation).
   double revisit_score_sigmas = 0.65;
+  /// That standard deviation in units of the drift the accepted loops have shown: scaled by
+  /// sqrt(s), s the drift model's variance scale fitted to their innovations (the robust fit of
+  /// calibrate_drift, at least 5 loops; never below 1, the model's), unless a look-alike
+  /// (lookalike_distance, lookalike_distance_vertical) explains the hypothesis' median member
+  /// nearly as well as the place (lookalike_margin). false: the model's std alone.
+  bool revisit_observed_drift = true;
   /// Rival hypotheses of one revisit compete by misfit = median Mahalanobis distance of their
   /// members minus revisit_member_weight per member beyond the first (support counts, in units
   /// of d2); a hypothesis is released only if its misfit is lower than every rival's by

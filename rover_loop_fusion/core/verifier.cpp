@@ -328,13 +328,19 @@ bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
     *why = s.str();
     return false;
   }
-  return rule_->judge(group, why);
+  const bool passed = rule_->judge(group, why);
+  // The rule's text opens with the hypothesis' size and loops, which the release names itself.
+  const size_t body = why->find("): ");
+  judged_ = passed && body != std::string::npos ? why->substr(body + 3) : std::string();
+  return passed;
 }
 
 void Verifier::release(const HeldGroup& group) {
   std::ostringstream why;
   const bool revisit = group.front().kind == HoldKind::kRevisit;
   const bool global = group.front().kind == HoldKind::kGlobal;
+  const std::string judged = revisit ? judged_ : std::string();
+  judged_.clear();
   if (revisit)
     why << "released with its revisit hypothesis: " << group.size() << " mutually consistent candidates (loops ";
   else if (global)
@@ -344,6 +350,7 @@ void Verifier::release(const HeldGroup& group) {
     why << "confirmed: " << group.size() << " held candidates agree with each other (loops ";
   why << group.front().candidate.query_index << "->" << group.front().candidate.match_index << " .. "
       << group.back().candidate.query_index << "->" << group.back().candidate.match_index << ")";
+  if (!judged.empty()) why << ": " << judged;
   std::vector<const HeldCandidate*> committed;
   size_t first_match = group.front().match_pos;
   for (const HeldCandidate& h : group) {

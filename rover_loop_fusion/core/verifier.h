@@ -133,7 +133,8 @@ class Verifier {
   /// the cycle test's odometry legs are then both short, as its covariance assumes.
   std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window, bool near_matches = false) const;
   /// decision revisit: the joint test of a hypothesis (Actions::judge): it must not contradict
-  /// the accepted loops of its stretch, and must pass the rule's test against the prior.
+  /// the accepted loops of its stretch, and must pass the rule's test against the prior. What a
+  /// passed test found is kept for the release's verdicts (judged_).
   bool judgeRevisit(const HeldGroup& group, std::string* why);
   /// The accepted loops a group of rivals contradicts: those of its stretch that most of its
   /// members are inconsistent with.
@@ -182,6 +183,9 @@ class Verifier {
   std::unique_ptr<DecisionRule> rule_;
   Pending pending_;
   HeldCandidates held_;
+  /// What the last passed judgeRevisit() found (its fit, trial and bound): HeldCandidates
+  /// releases a hypothesis right after the judge passed it, and release() reports it.
+  std::string judged_;
   /// The re-tests of the addKeyframe() running (retestNow()).
   struct RetestBudget {
     std::chrono::steady_clock::time_point started;
