@@ -5,12 +5,6 @@
 namespace rover_loop_fusion {
 namespace core {
 
-namespace {
-
-size_t distance(size_t x, size_t y) { return x > y ? x - y : y - x; }
-
-}  // namespace
-
 void HeldCandidates::add(const HeldCandidate& h,
                          const std::function<bool(const HeldCandidate&, const HeldCandidate&)>& consistent) {
   const size_t window = static_cast<size_t>(h.kind == HoldKind::kRevisit ? config_.revisit.revisit_stretch : config_.hold.confirm_stretch);
@@ -20,7 +14,7 @@ void HeldCandidates::add(const HeldCandidate& h,
     if (f.kind != h.kind || f.query_segment != h.query_segment || f.match_segment != h.match_segment) continue;
     bool ok = true;
     for (size_t i = g.size() > k ? g.size() - k : 0; ok && i < g.size(); ++i)
-      ok = distance(g[i].query_pos, h.query_pos) <= window && consistent(g[i], h);
+      ok = keyframeDistance(g[i].query_pos, h.query_pos) <= window && consistent(g[i], h);
     if (ok) {
       g.push_back(h);
       return;
@@ -106,14 +100,14 @@ void HeldCandidates::settle(size_t now, const Actions& act, bool revisit) {
       for (size_t j = 0; j < groups_.size(); ++j) {
         if (j == i || groups_[j].front().kind == HoldKind::kRival || groups_[j].front().kind == HoldKind::kRevisit)
           continue;  // rivals contend with accepted loops
-        if (distance(groups_[j].back().query_pos, g.back().query_pos) <= stretch && 2 * groups_[j].size() >= g.size())
+        if (keyframeDistance(groups_[j].back().query_pos, g.back().query_pos) <= stretch && 2 * groups_[j].size() >= g.size())
           blocked = true;
       }
       if (!blocked) {
         // Rivals too small to block are contradicted by the released group: dropped.
         releaseDropping(i, act, "a larger group of candidates of the same stretch contradicts it",
                         [&](const HeldGroup& other, const HeldGroup& released) {
-                          return distance(other.back().query_pos, released.back().query_pos) <= stretch &&
+                          return keyframeDistance(other.back().query_pos, released.back().query_pos) <= stretch &&
                                  other.front().kind != HoldKind::kRival && other.front().kind != HoldKind::kRevisit;
                         });
         i = 0;  // the graph changed: look at the rest again

@@ -46,6 +46,9 @@ struct HeldCandidate {
 };
 using HeldGroup = std::vector<HeldCandidate>;
 
+/// Keyframes between two positions in the graph.
+inline size_t keyframeDistance(size_t x, size_t y) { return x > y ? x - y : y - x; }
+
 class HeldCandidates {
  public:
   /// Reads confirm_count, confirm_window (expiry), confirm_stretch, revoke_group and revisit_*.

@@ -34,7 +34,7 @@ std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t
   std::vector<LoopCandidate> out;
   for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
     const HeldCandidate a = heldFor(l);
-    if (near_matches && (a.match_pos > h.match_pos ? a.match_pos - h.match_pos : h.match_pos - a.match_pos) > window)
+    if (near_matches && keyframeDistance(a.match_pos, h.match_pos) > window)
       continue;
     // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
     if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) &&
