@@ -37,6 +37,23 @@ sim::LapsOptions drifting() {
   return o;
 }
 
+/// A VIO that drifts steadily, as the lab's bags (docs/vins-fusion.md): each odometry step
+/// turned by yaw_deg_per_m and stretched by scale.
+void steadyDrift(sim::Scene* s, double step_m, double yaw_deg_per_m, double scale) {
+  std::vector<core::Pose> vio;
+  for (size_t k = 0; k < s->keyframes.size(); ++k) {
+    if (k == 0) {
+      vio.push_back(s->keyframes[0].vio);
+      continue;
+    }
+    core::Pose step = sim::relative(s->keyframes[k - 1].vio, s->keyframes[k].vio);
+    step.t *= scale;
+    step.q = (core::yawRotation(yaw_deg_per_m * M_PI / 180.0 * step_m) * step.q).normalized();
+    vio.push_back(sim::compose(vio.back(), step));
+  }
+  for (size_t k = 0; k < s->keyframes.size(); ++k) s->keyframes[k].vio = vio[k];
+}
+
 core::VerifierConfig config(core::Decision decision) {
   core::VerifierConfig c;
   c.decision = decision;
@@ -418,18 +435,8 @@ TEST(RevisitRule, ALoopOfTheSameQueriesWhoseMatchIsALapAwayDoesNotContradictAHyp
   o.true_every = 2;
   sim::Scene s = sim::makeLapsScene(o);
   // A VIO whose yaw drifts steadily (0.04 deg/m; the lab's bags 0.2 on a lap of 44 m), beyond
-  // the drift model's random walk over a lap: each odometry step turned by that bias.
-  std::vector<core::Pose> vio;
-  for (size_t k = 0; k < s.keyframes.size(); ++k) {
-    if (k == 0) {
-      vio.push_back(s.keyframes[0].vio);
-      continue;
-    }
-    core::Pose step = sim::relative(s.keyframes[k - 1].vio, s.keyframes[k].vio);
-    step.q = (core::yawRotation(0.04 * M_PI / 180.0 * o.step) * step.q).normalized();
-    vio.push_back(sim::compose(vio.back(), step));
-  }
-  for (size_t k = 0; k < s.keyframes.size(); ++k) s.keyframes[k].vio = vio[k];
+  // the drift model's random walk over a lap.
+  steadyDrift(&s, o.step, 0.04, 1.0);
   const int64_t per_lap = static_cast<int64_t>(std::lround(2.0 * (o.width + o.height) / o.step));
   core::VerifierConfig cfg = config(core::Decision::kRevisit);
   cfg.revisit.revisit_reject_probability = 1.0 - 1e-12;
@@ -478,23 +485,6 @@ TEST(RevisitRule, ALoopOfTheSameQueriesWhoseMatchIsALapAwayDoesNotContradictAHyp
 
 namespace {
 
-/// A VIO that drifts steadily, as the lab's bags (docs/vins-fusion.md): each odometry step
-/// turned by yaw_deg_per_m and stretched by scale.
-void steadyDrift(sim::Scene* s, double step_m, double yaw_deg_per_m, double scale) {
-  std::vector<core::Pose> vio;
-  for (size_t k = 0; k < s->keyframes.size(); ++k) {
-    if (k == 0) {
-      vio.push_back(s->keyframes[0].vio);
-      continue;
-    }
-    core::Pose step = sim::relative(s->keyframes[k - 1].vio, s->keyframes[k].vio);
-    step.t *= scale;
-    step.q = (core::yawRotation(yaw_deg_per_m * M_PI / 180.0 * step_m) * step.q).normalized();
-    vio.push_back(sim::compose(vio.back(), step));
-  }
-  for (size_t k = 0; k < s->keyframes.size(); ++k) s->keyframes[k].vio = vio[k];
-}
-
 /// Accepted (at verify() or released) among candidates whose query is at least `from`.
 int acceptedFrom(const Outcome& r, int64_t from) {
   int n = 0;
@@ -504,8 +494,6 @@ int acceptedFrom(const Outcome& r, int64_t from) {
     if (d.kind == LoopDecision::Kind::kRelease && d.candidate.query_index >= from) ++n;
   return n;
 }
-
-}  // namespace
 
 /// Three laps of a VIO that drifts steadily (0.215 deg/m, scale 1.02, as the lab's bags), every
 /// true candidate matched to lap 1 (as loop_fusion's detector matched lap 3 there).
@@ -529,6 +517,8 @@ bool anyDetail(const Outcome& r, const std::string& text) {
   return std::any_of(r.decisions.begin(), r.decisions.end(),
                      [&](const LoopDecision& d) { return d.verdict.detail.find(text) != std::string::npos; });
 }
+
+}  // namespace
 
 TEST(RevisitRule, AThirdLapIsJudgedInUnitsOfTheDriftTheAcceptedLoopsShow) {
   // Found inside loop_fusion (docs/vins-fusion.md, stop 36): after a steady yaw drift and a
@@ -560,17 +550,15 @@ TEST(RevisitRule, TheObservedDriftIsNotUsedWhereALookAlikeExplainsTheHypothesisO
   // its neighbour): lap 3 is judged on the model's std, and lost as without the observed drift.
   int64_t per_lap = 0;
   const sim::Scene s = steadilyDriftingLaps(&per_lap);
-  core::VerifierConfig dense = config(core::Decision::kRevisit);
-  dense.chi2.lookalike_distance = 0.25;
-  dense.chi2.lookalike_distance_vertical = 0.0;
-  const Outcome a = run(dense, s);
-  EXPECT_LT(acceptedFrom(a, 2 * per_lap), 10);
-  EXPECT_TRUE(anyDetail(a, "not applied: a look-alike explains the median member as well"));
+  auto lap3With = [&](double horizontal, double vertical, const std::string& why) {
+    core::VerifierConfig c = config(core::Decision::kRevisit);
+    c.chi2.lookalike_distance = horizontal;
+    c.chi2.lookalike_distance_vertical = vertical;
+    const Outcome r = run(c, s);
+    EXPECT_LT(acceptedFrom(r, 2 * per_lap), 10) << "look-alike spacing " << horizontal << " / " << vertical;
+    EXPECT_TRUE(anyDetail(r, why)) << why;
+  };
+  lap3With(0.25, 0.0, "not applied: a look-alike explains the median member as well");
   // No spacing known (the outdoor YAML: 0 and 0): nothing tells the place from a row.
-  core::VerifierConfig unknown = config(core::Decision::kRevisit);
-  unknown.chi2.lookalike_distance = 0.0;
-  unknown.chi2.lookalike_distance_vertical = 0.0;
-  const Outcome b = run(unknown, s);
-  EXPECT_LT(acceptedFrom(b, 2 * per_lap), 10);
-  EXPECT_TRUE(anyDetail(b, "not applied: no look-alike spacing is set"));
+  lap3With(0.0, 0.0, "not applied: no look-alike spacing is set");
 }
