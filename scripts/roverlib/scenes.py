@@ -17,7 +17,10 @@ after it); scene parameters for near twins (aisles, floors, doors 1-3 m apart), 
 
 Odometry noise level sigma (the paper's sigma): per keyframe step of length l the relative
 translation gets N(0, (sigma*l)^2) per horizontal axis (half that vertically) and the relative
-yaw N(0, (0.05*sigma*l)^2) rad; 6-DoF scenes also drift in roll and pitch.
+yaw N(0, (0.05*sigma*l)^2) rad; 6-DoF scenes also drift in roll and pitch. That is a random
+walk, the drift model the verifier assumes. Real VIO also drifts steadily (a gyro bias turns the
+yaw by the same angle every metre, a wrong scale stretches every step): `yaw_bias` (degrees per
+metre) and `scale_error` (fraction) add that on top, which no drift model sigma describes.
 """
 from dataclasses import dataclass
 from typing import Callable, List
@@ -221,15 +224,16 @@ LOOKALIKE_DISTANCE = {"warehouse": "spacing", "parking_deck": "floor_height", "c
 POC_SCENES = ("room", "sports_ground", "warehouse")
 
 
-def add_drift(truth, sigma, rng, six_dof=False):
-    """VIO-like odometry: the truth's relative motions with noise, integrated."""
+def add_drift(truth, sigma, rng, six_dof=False, yaw_bias=0.0, scale_error=0.0):
+    """VIO-like odometry: the truth's relative motions with noise, integrated; `yaw_bias` degrees
+    of yaw per metre and a translation scale of 1 + `scale_error` on top (steady drift)."""
     vio = [truth[0].copy()]
     for a, b in zip(truth[:-1], truth[1:]):
         rel = g.relative(a, b)
         length = np.linalg.norm(rel[:3, 3])
         noisy = rel.copy()
-        noisy[:3, 3] += rng.normal(0.0, sigma * length, 3) * np.array([1.0, 1.0, 0.5])
-        R = g.rot_z(rng.normal(0.0, YAW_NOISE_PER_METRE * sigma * length))
+        noisy[:3, 3] = (1.0 + scale_error) * noisy[:3, 3] + rng.normal(0.0, sigma * length, 3) * np.array([1.0, 1.0, 0.5])
+        R = g.rot_z(rng.normal(0.0, YAW_NOISE_PER_METRE * sigma * length) + np.radians(yaw_bias) * length)
         if six_dof:
             R = R @ g.rot_x(rng.normal(0.0, 0.5 * YAW_NOISE_PER_METRE * sigma * length)) @ \
                 g.rot_y(rng.normal(0.0, 0.5 * YAW_NOISE_PER_METRE * sigma * length))
@@ -376,14 +380,14 @@ def make_candidates(truth, twins, rng, n_true=100, n_false=100, min_gap=50, radi
 
 
 def make_scene(name, sigma=0.05, seed=0, n_true=100, n_false=100, six_dof=False, rows=1, early_lookalike=False,
-               random_fraction=0.2, min_false_distance=1.0, **scene_args):
+               random_fraction=0.2, min_false_distance=1.0, yaw_bias=0.0, scale_error=0.0, **scene_args):
     """A Scenario for one simulated scene at odometry noise `sigma` (hard-case options: see
     select_candidates; random_fraction: share of the false candidates that are random far
     pairs instead of look-alikes; min_false_distance: how far from the query a look-alike's
-    match must be, below 1 m for twins 1 m away)."""
+    match must be, below 1 m for twins 1 m away; yaw_bias, scale_error: steady drift, add_drift)."""
     rng = np.random.default_rng(seed)
     path = SCENES[name](rng, **scene_args)
-    vio = add_drift(path.truth, sigma, rng, six_dof)
+    vio = add_drift(path.truth, sigma, rng, six_dof, yaw_bias, scale_error)
     cands = make_candidates(path.truth, path.twins, rng, n_true, n_false, min_gap=path.min_gap,
                             radius=path.revisit_radius, random_fraction=random_fraction,
                             min_false_distance=min_false_distance, rows=rows, early_lookalike=early_lookalike)
@@ -391,4 +395,6 @@ def make_scene(name, sigma=0.05, seed=0, n_true=100, n_false=100, six_dof=False,
     meta = {"scene": name, "sigma": sigma, "seed": seed, "mode": "6dof" if six_dof else "4dof",
             "true_candidates": sum(c.label == 1 for c in cands),
             "false_candidates": sum(c.label == 0 for c in cands)}
+    if yaw_bias or scale_error:
+        meta.update(yaw_bias_deg_per_m=yaw_bias, scale_error=scale_error)
     return Scenario(f"{name}_s{sigma:g}_seed{seed}", kfs, cands, path.truth, meta)

@@ -100,6 +100,12 @@ def _poc():
          dict(name="city", sigma=0.03, seed=6, rows=5, early_lookalike=True, random_fraction=0.0)),
         ("kitti_05_route", "outdoor", "KITTI 05 streets, simulated drift; lane/facade twins, rows",
          dict(name="kitti_route", sequence="05", sigma=0.03, seed=7, rows=5, random_fraction=0.0)),
+        # steady drift (a gyro bias, a scale error) on top of the random walk: scenes.add_drift
+        ("corridor_yaw0.2_scale2pct", "indoor", "steady drift: 0.2 deg/m of yaw, 2 % scale, 3 laps",
+         dict(name="corridor", sigma=0.05, seed=8, yaw_bias=0.2, scale_error=0.02)),
+        ("warehouse_yaw0.15", "indoor", "steady drift: 0.15 deg/m of yaw",
+         dict(name="warehouse", sigma=0.05, seed=9, yaw_bias=0.15)),
+        ("room_yaw0.3", "indoor", "steady drift: 0.3 deg/m of yaw", dict(name="room", sigma=0.05, seed=10, yaw_bias=0.3)),
     ]
     for name, env, notes, args in hard_tuning:
         out.append(_case("poc", "tuning", name, env, notes=notes, **args))
@@ -135,6 +141,14 @@ def _poc():
               random_fraction=0.0), False),
         ("kitti_00_route", "outdoor", "KITTI 00 streets, simulated drift; lane/facade twins, rows",
          dict(name="kitti_route", sequence="00", sigma=0.03, seed=129, rows=5, random_fraction=0.0), False),
+        ("corridor_yaw0.25_scale2pct", "indoor", "steady drift: 0.25 deg/m of yaw, 2 % scale, 4 laps",
+         dict(name="corridor", sigma=0.05, seed=130, laps=4, yaw_bias=0.25, scale_error=0.02), False),
+        ("warehouse_yaw0.2_aisles2.5m", "indoor", "steady drift: 0.2 deg/m of yaw; aisles 2.5 m apart, rows of 5",
+         dict(name="warehouse", sigma=0.05, seed=131, spacing=2.5, rows=5, random_fraction=0.0, yaw_bias=0.2), False),
+        ("sports_ground_yaw0.1_scale-1pct", "indoor", "steady drift: 0.1 deg/m of yaw, -1 % scale",
+         dict(name="sports_ground", sigma=0.05, seed=132, yaw_bias=0.1, scale_error=-0.01), False),
+        ("room_yaw0.4", "indoor", "steady drift: 0.4 deg/m of yaw", dict(name="room", sigma=0.05, seed=133, yaw_bias=0.4),
+         False),
     ]
     for name, env, notes, args, quick in hard_test:
         out.append(_case("poc", "test", name, env, quick=quick, notes=notes,

@@ -183,6 +183,22 @@ def test_without_options_the_scenes_are_what_they_were():
     assert s.keyframes[5].T[0, 3] == pytest.approx(2.283498764913037, abs=1e-12)
 
 
+def test_steady_drift_turns_and_stretches_every_metre_by_the_same_amount():
+    """yaw_bias and scale_error: without noise, a straight line becomes an arc turning
+    yaw_bias degrees per metre whose steps are 1 + scale_error times as long."""
+    truth = [g.pose(np.eye(3), np.array([0.5 * i, 0.0, 0.0])) for i in range(201)]  # 100 m
+    rng = np.random.default_rng(0)
+    vio = scenes.add_drift(truth, 0.0, rng, yaw_bias=0.2, scale_error=0.02)
+    assert np.degrees(g.yaw_of(vio[-1][:3, :3])) == pytest.approx(20.0, abs=1e-9)
+    steps = [np.linalg.norm(b[:3, 3] - a[:3, 3]) for a, b in zip(vio[:-1], vio[1:])]
+    assert steps == pytest.approx([0.51] * 200, abs=1e-12)
+    plain = scenes.add_drift(truth, 0.0, rng)
+    assert all(np.array_equal(a, b) for a, b in zip(plain, truth))
+    s = scenes.make_scene("corridor", 0.05, seed=8, yaw_bias=0.2, scale_error=0.02)
+    assert s.meta["yaw_bias_deg_per_m"] == 0.2 and s.meta["scale_error"] == 0.02
+    assert "yaw_bias_deg_per_m" not in scenes.make_scene("corridor", 0.05, seed=8).meta
+
+
 def test_real_near_look_alikes():
     with shared_data():
         s = real_data.make_real("euroc_mh03", 7, lookalike=dict(offset=1.5, first="lateral", rows=3))
