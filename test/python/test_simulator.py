@@ -7,7 +7,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import ROOT, built_tool, shared_data, tilted_loop_scenario
+from conftest import ROOT, built_tool, script, shared_data, tilted_loop_scenario
 from roverlib import geometry as g
 from roverlib import datasets, real_data, scenario, scenes
 
@@ -245,3 +245,14 @@ def test_replay_says_when_a_query_is_older_than_its_match(tmp_path):
     assert row["reason"] == "invalid_input"
     assert row["detail"] == (f"match keyframe {m} comes after query keyframe {q} in keyframes.csv: the match must be "
                              f"the older keyframe"), row["detail"]
+
+
+def test_a_steady_drift_term_puts_the_first_revisit_back_inside_the_gate():
+    """scripts/steady_drift_d2.py: under the random-walk model alone a steady yaw drift's true
+    loops sit far outside the chi-square gate; with the steady term they are inside it, look-alikes
+    stay out, and a random-walk scene is left as it was."""
+    r = script("steady_drift_d2.py").main(["--split", "tuning", "corridor_yaw0.2_scale2pct", "room_s0.1"])
+    steady, plain = r["corridor_yaw0.2_scale2pct"], r["room_s0.1"]
+    assert steady["true_in_rw"] < 0.1 and steady["true_in_steady"] > 0.9
+    assert steady["false_in_steady"] < 0.05
+    assert plain["true_in_rw"] > 0.95 and plain["true_in_steady"] > 0.95 and plain["false_in_steady"] < 0.05

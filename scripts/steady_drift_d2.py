@@ -1,0 +1,125 @@
+#!/usr/bin/env python3
+"""How far a simulated case's loop candidates sit from the odometry, in units of the drift model:
+each candidate's squared Mahalanobis distance d2 (x, y, z, yaw of the query in the match's frame)
+against its odometry chain alone (no accepted loop: what the first revisit of a run sees), under
+the shipped YAML's random-walk drift model and with a steady-drift term added (a yaw rate with
+std --yaw-rate-sigma deg/m and a scale error with std --scale-sigma, common to the whole chain:
+rank-one terms J J^T sigma^2). Prints per case the ROC AUC of d2 (true loops below false ones)
+and the share of true and false candidates within the chi-square gate (4 dof).
+
+A diagnostic of the trajectory prior, not of the verifier: the verifier's own covariance also
+runs through accepted loops (docs/results.md, "Stop 37").
+
+    scripts/steady_drift_d2.py [--split tuning|test] [--yaw-rate-sigma 0.2] [--scale-sigma 0.02]
+                               [--gate 0.999] [cases ...]      (default: every simulated case)
+"""
+import argparse
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from roverlib import drift_model, splits  # noqa: E402
+from roverlib import geometry as g  # noqa: E402
+
+CHI2_4 = {0.99: 13.277, 0.999: 18.467, 0.9999: 23.513}
+
+
+def pose4(T):
+    return np.array([T[0, 3], T[1, 3], T[2, 3], g.yaw_of(T[:3, :3])])
+
+
+def chain(steps, yaw_rate=0.0, scale=0.0):
+    """The chain's end in its start frame with a steady yaw rate [rad/m] and scale error."""
+    T = np.eye(4)
+    for S in steps:
+        S = S.copy()
+        length = np.linalg.norm(S[:3, 3])
+        S[:3, 3] *= 1.0 + scale
+        S[:3, :3] = g.rot_z(yaw_rate * length) @ S[:3, :3]
+        T = T @ S
+    return T
+
+
+def covariances(steps, model, yaw_rate_sigma, scale_sigma):
+    """(random walk, random walk + steady term) covariance of the chain's end, 4x4, loop noise in."""
+    poses = [np.eye(4)]
+    for S in steps:
+        poses.append(poses[-1] @ S)
+    end = poses[-1][:3, 3]
+    C = np.diag([model.loop_sigma_t ** 2] * 3 + [model.loop_sigma_yaw ** 2])
+    for k, S in enumerate(steps):
+        length = max(np.linalg.norm(S[:3, 3]), model.min_step)
+        J = np.zeros((4, 3))
+        J[:3, :3] = poses[k][:3, :3]  # a translation error of step k moves the end with it
+        C += J @ np.diag([model.sigma_xy ** 2, model.sigma_xy ** 2, model.sigma_z ** 2]) @ J.T * length
+        d = end - poses[k + 1][:3, 3]  # a yaw error of step k turns the rest of the chain
+        jy = np.array([-d[1], d[0], 0.0, 1.0])
+        C += np.outer(jy, jy) * model.sigma_yaw ** 2 * length
+    eps = 1e-6
+    base = pose4(chain(steps))
+    jb = (pose4(chain(steps, eps)) - base) / eps
+    js = (pose4(chain(steps, 0.0, eps)) - base) / eps
+    steady = C + np.outer(jb, jb) * np.radians(yaw_rate_sigma) ** 2 + np.outer(js, js) * scale_sigma ** 2
+    return C, steady
+
+
+def case_d2(scenario, model, yaw_rate_sigma, scale_sigma):
+    """[(label, d2 random walk, d2 with the steady term)] per candidate."""
+    P = [k.T for k in scenario.keyframes]
+    out = []
+    for c in scenario.candidates:
+        steps = [g.relative(P[i], P[i + 1]) for i in range(c.match, c.query)]
+        nu = pose4(c.T_rel) - pose4(g.relative(P[c.match], P[c.query]))
+        nu[3] = (nu[3] + np.pi) % (2 * np.pi) - np.pi
+        rw, steady = covariances(steps, model, yaw_rate_sigma, scale_sigma)
+        out.append((c.label, nu @ np.linalg.solve(rw, nu), nu @ np.linalg.solve(steady, nu)))
+    return out
+
+
+def auc(rows, col):
+    t = np.array([r[col] for r in rows if r[0] == 1])
+    f = np.array([r[col] for r in rows if r[0] == 0])
+    if not len(t) or not len(f):
+        return float("nan")
+    return float(np.mean([(x < f).mean() + 0.5 * (x == f).mean() for x in t]))
+
+
+def summary(rows, gate):
+    def within(label, col):
+        v = [r[col] <= gate for r in rows if r[0] == label]
+        return float(np.mean(v)) if v else float("nan")
+    return {"auc_rw": auc(rows, 1), "auc_steady": auc(rows, 2),
+            "true_in_rw": within(1, 1), "true_in_steady": within(1, 2),
+            "false_in_rw": within(0, 1), "false_in_steady": within(0, 2)}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--split", choices=("tuning", "test"), default="tuning")
+    ap.add_argument("--yaw-rate-sigma", type=float, default=0.2, help="deg per metre")
+    ap.add_argument("--scale-sigma", type=float, default=0.02, help="fraction")
+    ap.add_argument("--gate", type=float, choices=sorted(CHI2_4), default=0.999, help="chi-square probability")
+    ap.add_argument("cases", nargs="*")
+    a = ap.parse_args(argv)
+    cases = [c for c in splits.cases("poc", a.split) if not a.cases or c.name in a.cases]
+    missing = set(a.cases) - {c.name for c in cases}
+    if missing:
+        ap.error(f"not simulated {a.split} cases: {', '.join(sorted(missing))}")
+    gate = CHI2_4[a.gate]
+    print(f"d2 against the odometry chain alone; steady term: yaw rate std {a.yaw_rate_sigma} deg/m, "
+          f"scale std {a.scale_sigma}; gate chi2({a.gate}, 4) = {gate}")
+    print("case | AUC random walk | AUC + steady | true within gate rw / + steady | false within gate rw / + steady")
+    results = {}
+    for c in cases:
+        model = drift_model.from_yaml(c.environment)
+        s = summary(case_d2(c.build(), model, a.yaw_rate_sigma, a.scale_sigma), gate)
+        results[c.name] = s
+        print(f"{c.name} | {s['auc_rw']:.3f} | {s['auc_steady']:.3f} | {s['true_in_rw']:.2f} / {s['true_in_steady']:.2f}"
+              f" | {s['false_in_rw']:.2f} / {s['false_in_steady']:.2f}")
+    return results
+
+
+if __name__ == "__main__":
+    main()
