@@ -21,7 +21,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from roverlib import drift_model, splits  # noqa: E402
+from roverlib import drift_model, scenes, splits  # noqa: E402
 from roverlib import geometry as g  # noqa: E402
 
 CHI2_4 = {0.99: 13.277, 0.999: 18.467, 0.9999: 23.513}
@@ -31,27 +31,21 @@ def pose4(T):
     return np.array([T[0, 3], T[1, 3], T[2, 3], g.yaw_of(T[:3, :3])])
 
 
-def chain(steps, yaw_rate=0.0, scale=0.0):
-    """The chain's end in its start frame with a steady yaw rate [rad/m] and scale error."""
-    T = np.eye(4)
-    for S in steps:
-        S = S.copy()
-        length = np.linalg.norm(S[:3, 3])
-        S[:3, 3] *= 1.0 + scale
-        S[:3, :3] = g.rot_z(yaw_rate * length) @ S[:3, :3]
-        T = T @ S
-    return T
+def chain(poses, yaw_rate=0.0, scale=0.0):
+    """The last pose relative to the first with a steady yaw rate [rad/m] and scale error on
+    the steps between them (scenes.add_drift without noise)."""
+    drifted = scenes.add_drift(poses, 0.0, np.random.default_rng(0), yaw_bias=np.degrees(yaw_rate), scale_error=scale)
+    return g.relative(drifted[0], drifted[-1])
 
 
-def covariances(steps, model, yaw_rate_sigma, scale_sigma):
-    """(random walk, random walk + steady term) covariance of the chain's end, 4x4, loop noise in."""
-    poses = [np.eye(4)]
-    for S in steps:
-        poses.append(poses[-1] @ S)
+def covariances(track, model, yaw_rate_sigma, scale_sigma):
+    """(random walk, random walk + steady term) covariance of the pose of track[-1] relative to
+    track[0] (odometry poses), 4x4, loop noise in."""
+    poses = [g.relative(track[0], T) for T in track]
     end = poses[-1][:3, 3]
     C = np.diag([model.loop_sigma_t ** 2] * 3 + [model.loop_sigma_yaw ** 2])
-    for k, S in enumerate(steps):
-        length = max(np.linalg.norm(S[:3, 3]), model.min_step)
+    for k in range(len(poses) - 1):
+        length = max(np.linalg.norm(poses[k + 1][:3, 3] - poses[k][:3, 3]), model.min_step)
         J = np.zeros((4, 3))
         J[:3, :3] = poses[k][:3, :3]  # a translation error of step k moves the end with it
         C += J @ np.diag([model.sigma_xy ** 2, model.sigma_xy ** 2, model.sigma_z ** 2]) @ J.T * length
@@ -59,9 +53,9 @@ def covariances(steps, model, yaw_rate_sigma, scale_sigma):
         jy = np.array([-d[1], d[0], 0.0, 1.0])
         C += np.outer(jy, jy) * model.sigma_yaw ** 2 * length
     eps = 1e-6
-    base = pose4(chain(steps))
-    jb = (pose4(chain(steps, eps)) - base) / eps
-    js = (pose4(chain(steps, 0.0, eps)) - base) / eps
+    base = pose4(chain(track))
+    jb = (pose4(chain(track, eps)) - base) / eps
+    js = (pose4(chain(track, 0.0, eps)) - base) / eps
     steady = C + np.outer(jb, jb) * np.radians(yaw_rate_sigma) ** 2 + np.outer(js, js) * scale_sigma ** 2
     return C, steady
 
@@ -71,10 +65,9 @@ def case_d2(scenario, model, yaw_rate_sigma, scale_sigma):
     P = [k.T for k in scenario.keyframes]
     out = []
     for c in scenario.candidates:
-        steps = [g.relative(P[i], P[i + 1]) for i in range(c.match, c.query)]
         nu = pose4(c.T_rel) - pose4(g.relative(P[c.match], P[c.query]))
         nu[3] = (nu[3] + np.pi) % (2 * np.pi) - np.pi
-        rw, steady = covariances(steps, model, yaw_rate_sigma, scale_sigma)
+        rw, steady = covariances(P[c.match:c.query + 1], model, yaw_rate_sigma, scale_sigma)
         out.append((c.label, nu @ np.linalg.solve(rw, nu), nu @ np.linalg.solve(steady, nu)))
     return out
 
