@@ -43,7 +43,7 @@ Eigen::Isometry3d poseAt(const KeyframeGraph& graph, size_t pos, bool vio) {
 }  // namespace
 
 int cycleTest(const KeyframeGraph& graph, const VerifierConfig& config, double drift_scale, const HeldCandidate& a,
-              const HeldCandidate& b, bool from_vio) {
+              const HeldCandidate& b, bool from_vio, double* residual_m) {
   // The cycle q_a -> m_a -> m_b -> q_b -> q_a through the two loops and the odometry between
   // the matches and between the queries must close: C = Za^-1 (Tma^-1 Tmb) Zb (Tqb^-1 Tqa) = I.
   // Each factor is a 4-DoF relative pose B with its covariance (from the older keyframe to the
@@ -81,6 +81,7 @@ int cycleTest(const KeyframeGraph& graph, const VerifierConfig& config, double d
     return cycleResidual(C);
   };
   const Eigen::Vector4d r = residual(-1, Eigen::Vector4d::Zero());
+  if (residual_m) *residual_m = r.head<3>().norm();
   Eigen::Matrix4d S = Eigen::Matrix4d::Zero();
   const double h = 1e-6;
   for (int k = 0; k < 4; ++k) {

@@ -17,7 +17,7 @@ namespace core {
 /// factors are the relative poses of X, or of the VIO poses (`from_vio`: what the chain
 /// covariance describes, and what false loops already accepted have not bent).
 int cycleTest(const KeyframeGraph& graph, const VerifierConfig& config, double drift_scale, const HeldCandidate& a,
-              const HeldCandidate& b, bool from_vio = false);
+              const HeldCandidate& b, bool from_vio = false, double* residual_m = nullptr);
 
 }  // namespace core
 }  // namespace rover_loop_fusion

@@ -252,6 +252,12 @@ std::vector<Parameter> makeTable() {
                      "Mahalanobis distance) when rivals compete"));
   t.push_back(number("revisit_margin", "", FIELD(revisit.revisit_margin), 0.0, 100.0, false,
                      "a hypothesis is released only if its misfit is lower than every rival's by this"));
+  t.push_back(integer("revisit_extend", "loops", FIELD(revisit.revisit_extend), 0, 1000,
+                      "a candidate the per-candidate test rejects is accepted if this many accepted loops of "
+                      "its stretch close a cycle with it along the VIO odometry (within gate_probability and "
+                      "revisit_extend_residual), none contradicts it and its trial converges; 0: off"));
+  t.push_back(number("revisit_extend_residual", "m", FIELD(revisit.revisit_extend_residual), 0.0, 100.0, false,
+                     "the largest translation residual of such a cycle"));
   t.push_back(number("revisit_retest_budget_ms", "ms", FIELD(revisit.revisit_retest_budget_ms), 0.0, 60000.0, false,
                      "what the re-tests of dropped revisit members may spend together on one keyframe's "
                      "arrival; the rest wait for the next keyframe (one runs per keyframe at least); "

@@ -6,6 +6,7 @@
 
 #include "rover_loop_fusion/core/cycle_test.h"
 #include "rover_loop_fusion/core/decision.h"
+#include "rover_loop_fusion/core/trial_budget.h"
 
 #include <algorithm>
 #include <chrono>
@@ -42,6 +43,54 @@ std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t
       out.push_back(l);
   }
   return out;
+}
+
+bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, const Check& failed,
+                              std::chrono::steady_clock::time_point t0, Verdict* measured, Decided* decided,
+                              std::string* detail) {
+  if (config_.decision != Decision::kRevisit || config_.revisit.revisit_extend <= 0) return false;
+  if (failed.reason != Reason::kInnovationAboveBound && failed.reason != Reason::kScoreAboveThreshold) return false;
+  HeldCandidate h = heldFor(c);
+  h.query_pos = qpos;
+  h.match_pos = mpos;
+  const size_t window = static_cast<size_t>(config_.revisit.revisit_stretch);
+  const size_t first = qpos > window ? qpos - window : 0;
+  int agree = 0;
+  LoopCandidate example;
+  for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, qpos + window)) {
+    const HeldCandidate a = heldFor(l);
+    if (keyframeDistance(a.match_pos, mpos) > window || graph_.segmentAt(a.query_pos) != graph_.segmentAt(qpos))
+      continue;
+    // Along the VIO odometry, both legs short: what X made of the accepted loops plays no part.
+    double residual = 0.0;
+    int r = cycleTest(graph_, config_, rule_->driftScale(), a, h, true, &residual);
+    if (r == 1 && !(residual <= config_.revisit.revisit_extend_residual)) r = 0;
+    if (r == 0) return false;  // an accepted loop of its revisit says otherwise
+    if (r == 1 && ++agree == 1) example = l;
+  }
+  if (agree < config_.revisit.revisit_extend) return false;
+  std::ostringstream s;
+  s.precision(3);
+  s << std::fixed << failed.detail << "; extends " << agree << " accepted loop(s) of its revisit (e.g. "
+    << example.query_index << "->" << example.match_index
+    << "): their cycles along the VIO odometry close within revisit_extend_residual, none contradicts it";
+  if (failed.reason == Reason::kInnovationAboveBound) {  // the gate stopped it before its trial
+    const double budget_left =
+        config_.trial.time_budget_ms > 0 ? std::max(1e-3, config_.trial.time_budget_ms - msSince(t0)) : 0.0;
+    decided->solution = graph_.solveWindow(mpos, qpos, &c, config_.trial.robust_candidate,
+                                           config_.trial.max_iterations, budget_left, -1);
+    const SolveSummary& o = decided->solution.summary;
+    measured->iterations = o.iterations;
+    measured->solve_ms = o.solve_ms;
+    measured->converged = o.converged && o.finite;
+    Eigen::Matrix3Xd before, after;
+    measured->window_size = graph_.scoredPositions(decided->solution, &before, &after);
+    if (o.finite) measured->score = deformationScore(before, after, config_.alignment);
+    if (!measured->converged) return false;  // no answer from the trial: fail closed
+    s << "; its trial converged (score " << measured->score << " m)";
+  }
+  *detail = s.str();
+  return true;
 }
 
 bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {

@@ -398,6 +398,19 @@ struct RevisitConfig {
   /// revisit_margin.
   double revisit_member_weight = 1.0;
   double revisit_margin = 4.0;
+  /// A candidate the per-candidate test rejects (innovation gate or score) is accepted as an
+  /// extension of its revisit if at least this many accepted loops of its stretch (queries and
+  /// matches within revisit_stretch keyframes) each close a cycle with it along the VIO odometry
+  /// (the cycle test, gate_probability, and a translation residual of at most
+  /// revisit_extend_residual), none of them contradicts it, and its trial converges. After a
+  /// steady drift X keeps most of the yaw that loop_fusion's weakly weighted loop yaw cannot
+  /// correct, and a revisit's later true loops fail the gate against X; the short cycle through
+  /// its accepted loops does not see that yaw. 0: off.
+  int revisit_extend = 2;
+  /// [m] the largest translation residual of such a cycle (the loops' relative poses and the
+  /// odometry between their queries and between their matches). The cycle test's covariance
+  /// alone let look-alikes through where the odometry's own covariance is loose (pose graphs).
+  double revisit_extend_residual = 0.25;
   /// What the re-tests of dropped revisit members (each a trial, bounded by time_budget_ms) may
   /// spend together on one keyframe's arrival [ms] (counted from the arrival, the hypotheses'
   /// judges included): once it is spent, the members still due wait for the next keyframe (at

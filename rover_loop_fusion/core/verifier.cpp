@@ -121,7 +121,9 @@ Verdict Verifier::verify(const LoopCandidate& c) {
 
   Decided decided;
   const RuleOutcome out = rule_->decide(c, qpos, mpos, t0, &measured, &decided);
-  if (!out.check.passed) return rejectOrHold(out.check);
+  std::string extended;
+  if (!out.check.passed && !extendsRevisit(c, qpos, mpos, out.check, t0, &measured, &decided, &extended))
+    return rejectOrHold(out.check);
   if (out.hold) {
     hold(c, qpos, mpos, out.kind, out.d2);
     return withNumbers(Verdict::Defer(c, out.check.detail), measured, t0);
@@ -130,7 +132,7 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   pending_.candidate = c;
   pending_.revision = graph_.revision();
   pending_.decided = std::move(decided);
-  return withNumbers(Verdict::Accept(c, out.check.detail), measured, t0);
+  return withNumbers(Verdict::Accept(c, out.check.passed ? out.check.detail : extended), measured, t0);
 }
 
 std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int condense_min_window) {

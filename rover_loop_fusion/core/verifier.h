@@ -132,6 +132,12 @@ class Verifier {
   /// With `near_matches`, only loops whose match also lies within `window` keyframes of h's:
   /// the cycle test's odometry legs are then both short, as its covariance assumes.
   std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window, bool near_matches = false) const;
+  /// decision revisit, revisit_extend: whether a candidate the rule rejected for `failed`
+  /// (innovation gate or score) extends accepted loops of its revisit (core/types.h); if so, its
+  /// trial is in *decided (run here if the gate stopped it before one), *detail says why.
+  bool extendsRevisit(const LoopCandidate& c, size_t query_pos, size_t match_pos, const Check& failed,
+                      std::chrono::steady_clock::time_point t0, Verdict* measured, Decided* decided,
+                      std::string* detail);
   /// decision revisit: the joint test of a hypothesis (Actions::judge): it must not contradict
   /// the accepted loops of its stretch, and must pass the rule's test against the prior. What a
   /// passed test found is kept for the release's verdicts (judged_).
