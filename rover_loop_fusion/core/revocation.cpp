@@ -1,7 +1,7 @@
 // Revocation (revoke_group, core/verifier.h): a candidate rejected for contradicting the graph
 // that is inconsistent with an accepted loop of its stretch is held as a rival; a confirmed group
 // of rivals is decided against the graph without the loops it contradicts. Also what decision
-// revisit asks of the accepted loops (contradicted()).
+// revisit asks of the accepted loops (contradicted(), extendsRevisit()).
 #include "rover_loop_fusion/core/verifier.h"
 
 #include "rover_loop_fusion/core/cycle_test.h"
