@@ -390,7 +390,17 @@ Check metricDecision(const VerifierConfig& config, KeyframeGraph& graph, const L
   const Check gate = innovationGate(config, measured->innovation, measured->path_length);
   if (!gate.passed) return gate;
 
-  // The budget counts from the call: what the checks above took is spent.
+  runTrial(config, graph, c, qpos, mpos, condense_min_window, t0, measured, trial);
+  const SolveSummary& o = trial->summary;
+  Check score = scoreTest(o, measured->score, measured->threshold, measured->window_size, config.trial.time_budget_ms);
+  if (trial->condensed) score.detail += " (" + o.message + ")";
+  return score;
+}
+
+void runTrial(const VerifierConfig& config, KeyframeGraph& graph, const LoopCandidate& c, size_t qpos, size_t mpos,
+              int condense_min_window, std::chrono::steady_clock::time_point t0, Verdict* measured,
+              TrialSolution* trial) {
+  // The budget counts from the call: what the checks before it took is spent.
   const double budget_left =
       config.trial.time_budget_ms > 0 ? std::max(1e-3, config.trial.time_budget_ms - msSince(t0)) : 0.0;
   *trial = graph.solveWindow(mpos, qpos, &c, config.trial.robust_candidate, config.trial.max_iterations, budget_left,
@@ -403,10 +413,6 @@ Check metricDecision(const VerifierConfig& config, KeyframeGraph& graph, const L
   Eigen::Matrix3Xd before, after;
   measured->window_size = graph.scoredPositions(*trial, &before, &after);
   if (o.finite) measured->score = deformationScore(before, after, config.alignment);
-
-  Check score = scoreTest(o, measured->score, measured->threshold, measured->window_size, config.trial.time_budget_ms);
-  if (trial->condensed) score.detail += " (" + o.message + ")";
-  return score;
 }
 
 std::unique_ptr<DecisionRule> makeDecisionRule(const VerifierConfig& config, KeyframeGraph& graph) {

@@ -105,5 +105,12 @@ Check metricDecision(const VerifierConfig& config, KeyframeGraph& graph, const L
                      size_t match_pos, int condense_min_window, std::chrono::steady_clock::time_point t0,
                      Verdict* measured, TrialSolution* trial);
 
+/// The trial of metricDecision alone (no gate, no score test): solves it within what is left of
+/// time_budget_ms since t0 and fills the trial's numbers (iterations, solve time, convergence,
+/// window, score).
+void runTrial(const VerifierConfig& config, KeyframeGraph& graph, const LoopCandidate& c, size_t query_pos,
+              size_t match_pos, int condense_min_window, std::chrono::steady_clock::time_point t0, Verdict* measured,
+              TrialSolution* trial);
+
 }  // namespace core
 }  // namespace rover_loop_fusion

@@ -6,7 +6,6 @@
 
 #include "rover_loop_fusion/core/cycle_test.h"
 #include "rover_loop_fusion/core/decision.h"
-#include "rover_loop_fusion/core/trial_budget.h"
 
 #include <algorithm>
 #include <chrono>
@@ -75,17 +74,7 @@ bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, 
     << example.query_index << "->" << example.match_index
     << "): their cycles along the VIO odometry close within revisit_extend_residual, none contradicts it";
   if (failed.reason == Reason::kInnovationAboveBound) {  // the gate stopped it before its trial
-    const double budget_left =
-        config_.trial.time_budget_ms > 0 ? std::max(1e-3, config_.trial.time_budget_ms - msSince(t0)) : 0.0;
-    decided->solution = graph_.solveWindow(mpos, qpos, &c, config_.trial.robust_candidate,
-                                           config_.trial.max_iterations, budget_left, -1);
-    const SolveSummary& o = decided->solution.summary;
-    measured->iterations = o.iterations;
-    measured->solve_ms = o.solve_ms;
-    measured->converged = o.converged && o.finite;
-    Eigen::Matrix3Xd before, after;
-    measured->window_size = graph_.scoredPositions(decided->solution, &before, &after);
-    if (o.finite) measured->score = deformationScore(before, after, config_.alignment);
+    runTrial(config_, graph_, c, qpos, mpos, -1, t0, measured, &decided->solution);
     if (!measured->converged) return false;  // no answer from the trial: fail closed
     s << "; its trial converged (score " << measured->score << " m)";
   }
