@@ -29,19 +29,28 @@ HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
   return h;
 }
 
-std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window, bool near_matches) const {
+Verifier::StretchLoops Verifier::stretchLoops(const HeldCandidate& h, size_t window, bool near_matches,
+                                              double max_residual) const {
   const size_t first = h.query_pos > window ? h.query_pos - window : 0;
-  std::vector<LoopCandidate> out;
+  StretchLoops out;
   for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
     const HeldCandidate a = heldFor(l);
-    if (near_matches && keyframeDistance(a.match_pos, h.match_pos) > window)
+    if ((near_matches && keyframeDistance(a.match_pos, h.match_pos) > window) ||
+        graph_.segmentAt(a.query_pos) != graph_.segmentAt(h.query_pos))
       continue;
     // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
-    if (graph_.segmentAt(a.query_pos) == graph_.segmentAt(h.query_pos) &&
-        cycleTest(graph_, config_, rule_->driftScale(), a, h, true) == 0)
-      out.push_back(l);
+    double residual = 0.0;
+    const int r = cycleTest(graph_, config_, rule_->driftScale(), a, h, true, &residual);
+    if (r == 0 || (r == 1 && !(residual <= max_residual)))
+      out.contradict.push_back(l);
+    else if (r == 1)
+      out.agree.push_back(l);
   }
   return out;
+}
+
+std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window, bool near_matches) const {
+  return stretchLoops(h, window, near_matches).contradict;
 }
 
 bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, const Check& failed,
@@ -49,25 +58,13 @@ bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, 
                               std::string* detail) {
   if (config_.decision != Decision::kRevisit || config_.revisit.revisit_extend <= 0) return false;
   if (failed.reason != Reason::kInnovationAboveBound && failed.reason != Reason::kScoreAboveThreshold) return false;
-  HeldCandidate h = heldFor(c);
-  h.query_pos = qpos;
-  h.match_pos = mpos;
-  const size_t window = static_cast<size_t>(config_.revisit.revisit_stretch);
-  const size_t first = qpos > window ? qpos - window : 0;
-  int agree = 0;
-  LoopCandidate example;
-  for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, qpos + window)) {
-    const HeldCandidate a = heldFor(l);
-    if (keyframeDistance(a.match_pos, mpos) > window || graph_.segmentAt(a.query_pos) != graph_.segmentAt(qpos))
-      continue;
-    // Along the VIO odometry, both legs short: what X made of the accepted loops plays no part.
-    double residual = 0.0;
-    int r = cycleTest(graph_, config_, rule_->driftScale(), a, h, true, &residual);
-    if (r == 1 && !(residual <= config_.revisit.revisit_extend_residual)) r = 0;
-    if (r == 0) return false;  // an accepted loop of its revisit says otherwise
-    if (r == 1 && ++agree == 1) example = l;
-  }
-  if (agree < config_.revisit.revisit_extend) return false;
+  // Both legs short (matches within the stretch too): what X made of the accepted loops plays no part.
+  const StretchLoops loops = stretchLoops(heldFor(c), static_cast<size_t>(config_.revisit.revisit_stretch), true,
+                                          config_.revisit.revisit_extend_residual);
+  if (!loops.contradict.empty() || loops.agree.size() < static_cast<size_t>(config_.revisit.revisit_extend))
+    return false;
+  const int agree = static_cast<int>(loops.agree.size());
+  const LoopCandidate& example = loops.agree.front();
   std::ostringstream s;
   s.precision(3);
   s << std::fixed << failed.detail << "; extends " << agree << " accepted loop(s) of its revisit (e.g. "

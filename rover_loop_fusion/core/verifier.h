@@ -48,6 +48,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -132,6 +133,14 @@ class Verifier {
   /// With `near_matches`, only loops whose match also lies within `window` keyframes of h's:
   /// the cycle test's odometry legs are then both short, as its covariance assumes.
   std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window, bool near_matches = false) const;
+  /// The accepted loops of that stretch (of h's query segment) that the cycle test finds
+  /// consistent with h within `max_residual` metres of translation (agree), and those it finds
+  /// inconsistent or off by more (contradict); loops whose cycle is not one chain in neither.
+  struct StretchLoops {
+    std::vector<LoopCandidate> agree, contradict;
+  };
+  StretchLoops stretchLoops(const HeldCandidate& h, size_t window, bool near_matches,
+                            double max_residual = std::numeric_limits<double>::infinity()) const;
   /// decision revisit, revisit_extend: whether a candidate the rule rejected for `failed`
   /// (innovation gate or score) extends accepted loops of its revisit (core/types.h); if so, its
   /// trial is in *decided (run here if the gate stopped it before one), *detail says why.

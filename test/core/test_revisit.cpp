@@ -495,6 +495,17 @@ int acceptedFrom(const Outcome& r, int64_t from) {
   return n;
 }
 
+/// Laps of a VIO that drifts steadily (steadyDrift) with little random-walk noise on top;
+/// *per_lap: keyframes per lap.
+sim::Scene steadyLaps(sim::LapsOptions o, double yaw_deg_per_m, double scale, int64_t* per_lap) {
+  o.sigma_t = 0.002;
+  o.sigma_yaw = 0.0005;
+  sim::Scene s = sim::makeLapsScene(o);
+  steadyDrift(&s, o.step, yaw_deg_per_m, scale);
+  *per_lap = static_cast<int64_t>(std::lround(2.0 * (o.width + o.height) / o.step));
+  return s;
+}
+
 /// Three laps of a VIO that drifts steadily (0.215 deg/m, scale 1.02, as the lab's bags), every
 /// true candidate matched to lap 1 (as loop_fusion's detector matched lap 3 there).
 sim::Scene steadilyDriftingLaps(int64_t* per_lap) {
@@ -504,11 +515,7 @@ sim::Scene steadilyDriftingLaps(int64_t* per_lap) {
   o.height = 8.0;
   o.step = 0.25;
   o.true_every = 1;
-  o.sigma_t = 0.002;
-  o.sigma_yaw = 0.0005;
-  sim::Scene s = sim::makeLapsScene(o);
-  steadyDrift(&s, o.step, 0.215, 1.02);
-  *per_lap = static_cast<int64_t>(std::lround(2.0 * (o.width + o.height) / o.step));
+  sim::Scene s = steadyLaps(o, 0.215, 1.02, per_lap);
   for (sim::SimCandidate& c : s.candidates) c.candidate.match_index %= *per_lap;
   return s;
 }
@@ -572,12 +579,7 @@ sim::Scene steadySecondLap(int64_t* per_lap) {
   o.width = 20.0;
   o.height = 10.0;
   o.true_every = 2;
-  o.sigma_t = 0.002;
-  o.sigma_yaw = 0.0005;
-  sim::Scene s = sim::makeLapsScene(o);
-  steadyDrift(&s, o.step, 0.2, 1.0);
-  *per_lap = static_cast<int64_t>(std::lround(2.0 * (o.width + o.height) / o.step));
-  return s;
+  return steadyLaps(o, 0.2, 1.0, per_lap);
 }
 
 /// Lap 2 through a verifier whose first `seeds` true loops of lap 2 are committed as they
