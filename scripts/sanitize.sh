@@ -3,6 +3,7 @@
 #   asan  the core gtests with AddressSanitizer + UndefinedBehaviorSanitizer (ROVER_SANITIZE;
 #         $ROVER_WS/build_sanitize, devel_sanitize)
 #   tsan  with ThreadSanitizer (ROVER_TSAN; build_tsan, devel_tsan): the core concurrency gtests
+#         (test/core/test_concurrency.cpp, built alone as test_core_concurrency)
 #         and the adapter stress test (loop_fusion's keyframe and optimisation threads with ROS
 #         spinners, against a private rosmaster); third-party suppressions in test/tsan.supp
 # Usage: scripts/sanitize.sh [asan] [tsan]   (no argument: both). Prints the time each took;
@@ -61,11 +62,11 @@ asan() {
 }
 
 tsan() {
-  build tsan ROVER_TSAN "$WS/tsan.log" test_core rover_test_adapter_stress rover_loop_fusion_plugins
+  build tsan ROVER_TSAN "$WS/tsan.log" test_core_concurrency rover_test_adapter_stress rover_loop_fusion_plugins
   export TSAN_OPTIONS="suppressions=$ROOT/test/tsan.supp halt_on_error=1 second_deadlock_stack=1"
   local rc=0
   LD_LIBRARY_PATH="$WS/devel_tsan/lib:${LD_LIBRARY_PATH:-}" run_gtest test_core_concurrency_tsan \
-    "$WS/tsan_core_run.log" "$WS/devel_tsan/lib/rover_loop_fusion/test_core" --gtest_filter='Concurrency*' || rc=1
+    "$WS/tsan_core_run.log" "$WS/devel_tsan/lib/rover_loop_fusion/test_core_concurrency" || rc=1
   # The adapter stress test needs a master and the indoor YAML in /loop_fusion/rover (as
   # adapter_stress.test gives it), and pluginlib must load the TSan build of the plugins:
   # devel_tsan first on the search paths.
