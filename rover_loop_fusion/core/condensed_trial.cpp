@@ -388,12 +388,12 @@ class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
       Eigen::Vector4d gap;
       gap.head<3>() = f.M.transpose() * (Pb - (Pa + f.D * (xb - xa)));
       gap[3] = wrapAngle(nb.yaw - x[pb].yaw - f.dyaw);
-      const ChainMomentsView unit = m_.unitOf(ch);
-      f.prefix_a = unit.prefix(la);
-      f.w = unit.cross(f.prefix_a, la, lb, lb).ldlt().solve(gap);
+      f.unit.reset(new ChainMomentsView(m_.unitOf(ch)));
+      f.prefix_a = f.unit->prefix(la);
+      f.w = f.unit->cross(f.prefix_a, la, lb, lb).ldlt().solve(gap);
       f.ready = true;
     }
-    const Eigen::Vector4d corr = m_.unitOf(ch).cross(f.prefix_a, la, p - ch.start, lb) * f.w;
+    const Eigen::Vector4d corr = f.unit->cross(f.prefix_a, la, p - ch.start, lb) * f.w;
     const KeyframeState& na = s_.states[i];
     const Eigen::Vector3d xa(x[pa].t[0], x[pa].t[1], x[pa].t[2]), xp(x[p].t[0], x[p].t[1], x[p].t[2]);
     const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();
@@ -410,6 +410,7 @@ class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
     Eigen::Matrix3d D, M;
     Eigen::Vector4d w;
     ChainMoments::Sums prefix_a;  // the chain's moments up to a, for every keyframe placed
+    std::unique_ptr<ChainMomentsView> unit;  // the chain's unit moments (unitOf once, not per keyframe placed)
   };
   const Impl& m_;
   const TrialSolution& s_;

@@ -37,7 +37,7 @@ void ChainMoments::extend(const ChainSteps& steps, size_t n) {
         checkpoints_.push_back(Sums());
       } else {
         Sums s = checkpoints_.back();
-        for (size_t j = k - kStride + 1; j <= k; ++j) s.add(step(steps, j), 1.0);
+        for (size_t j = k - kStride + 1; j <= k; ++j) addStep(steps, j, &s);
         checkpoints_.push_back(s);
       }
     }
@@ -45,32 +45,36 @@ void ChainMoments::extend(const ChainSteps& steps, size_t n) {
   n_ = std::max(n_, n);
 }
 
-ChainMoments::Sums ChainMoments::step(const ChainSteps& steps, size_t j) {
-  Sums s;
-  if (j == 0) return s;
+void ChainMoments::addStep(const ChainSteps& steps, size_t j, Sums* s) {
+  // The same sums, term by term, as adding a Sums of the one step (each term rounded as it
+  // would be there: the step's own moments first, then their addition), without the
+  // temporaries: the prefix sums of a whole-run trial's scoring are most of their cost.
+  if (j == 0) return;
   const Eigen::Matrix4d S = steps.stepCovariance(j);
   const Eigen::Vector3d pj = steps.position(j);
   const Eigen::Matrix3d Stt = S.topLeftCorner<3, 3>();
   if (S.topRightCorner<3, 1>().isZero(0.0) && (Stt - Stt(0, 0) * Eigen::Matrix3d::Identity()).isZero(0.0)) {
     // Isotropic in translation, no cross term (loop_fusion's unit weighting): R S R^T = S and
-    // the rotation is not needed.
-    s.A = Stt;
+    // the rotation is not needed; b and Bp get nothing.
+    s->A += Stt;
   } else {
     const Eigen::Matrix3d Rj = steps.rotation(j);
-    s.A = Rj * Stt * Rj.transpose();
-    s.b = Rj * S.topRightCorner<3, 1>();
-    s.Bp = s.b * pj.transpose();
+    s->A += (Rj * Stt * Rj.transpose()).eval();
+    const Eigen::Vector3d b = Rj * S.topRightCorner<3, 1>();
+    s->b += b;
+    s->Bp += (b * pj.transpose()).eval();
   }
-  s.c = S(3, 3);
-  s.cp = s.c * pj;
-  s.Cpp = s.c * pj * pj.transpose();
-  return s;
+  const double c = S(3, 3);
+  s->c += c;
+  const Eigen::Vector3d cp = c * pj;
+  s->cp += cp;
+  s->Cpp += (c * pj * pj.transpose()).eval();
 }
 
 ChainMoments::Sums ChainMoments::prefix(const ChainSteps& steps, size_t k) const {
   const size_t i = k / kStride;
   Sums s = checkpoints_[i];
-  for (size_t j = i * kStride + 1; j <= k; ++j) s.add(step(steps, j), 1.0);
+  for (size_t j = i * kStride + 1; j <= k; ++j) addStep(steps, j, &s);
   return s;
 }
 

@@ -83,7 +83,8 @@ class ChainMoments {
   Eigen::Matrix4d cross(const ChainSteps& steps, const Sums& prefix_a, size_t a, size_t k, size_t b) const;
 
  private:
-  static Sums step(const ChainSteps& steps, size_t j);
+  /// Adds the moments of step j (j >= 1; nothing for 0) to *s.
+  static void addStep(const ChainSteps& steps, size_t j, Sums* s);
 
   static constexpr size_t kStride = 8;
   size_t n_ = 0;
