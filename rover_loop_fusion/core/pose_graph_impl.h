@@ -141,7 +141,7 @@ struct KeyframeGraph::Impl {
   // segment) the prefix moments of the drift model along its VIO poses, kept from the start if
   // the verifier's configuration will need them (keepMoments), else built when first needed
   // (momentsOf, unitOf): a graph that never needs them (the node's loop_fusion stand-in, the
-  // metric rule without a long trial) does not pay for them (~70 bytes per keyframe, both kinds:
+  // metric rule without a long trial) does not pay for them (~140 bytes per keyframe, both kinds:
   // the moments hold checkpoints; the steps they sum are the keyframes' VIO poses, SegmentSteps).
   struct SequenceChain {
     size_t start = 0;
