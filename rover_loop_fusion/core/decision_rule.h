@@ -31,6 +31,10 @@ struct Decided {
   TrialSolution solution;                                     ///< metric: the trial's X*
   Eigen::Vector4d innovation = Eigen::Vector4d::Zero();       ///< chi2: for the calibration
   Eigen::Matrix4d chain_covariance = Eigen::Matrix4d::Zero(); ///< chi2, at variance scale 1
+  /// Its innovation teaches the drift calibration when the loop is committed (learn()): false
+  /// for a loop the prior did not confirm (a revisit extension), whose innovation is the drift
+  /// the prior ruled out, or a false row's offset.
+  bool calibrates = true;
 };
 
 /// The outcome of decide(): the test (passed, or the reason and why), and whether a candidate

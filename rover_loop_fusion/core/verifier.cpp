@@ -179,7 +179,7 @@ Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
   pending_.valid = false;
   Status updated;
   if (reuse) {
-    rule_->learn(p.decided);
+    if (p.decided.calibrates) rule_->learn(p.decided);
     updated = rule_->adoptDecided(p.decided, qpos, update_estimate);
   } else {
     if (!update_estimate) return Status::Ok();  // the caller updates X once for a group (release())

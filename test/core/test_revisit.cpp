@@ -588,6 +588,13 @@ sim::Scene steadySecondLap(int64_t* per_lap) {
 /// track; none if shift is 0).
 struct Extension {
   std::vector<Verdict> truth, lookalikes;
+  /// Each accepted loop in the order committed: taken as an extension (else alone, by the
+  /// per-candidate test), and the drift scale (calibrate_drift) before and after its commit.
+  struct Commit {
+    bool extension;
+    double before, after;
+  };
+  std::vector<Commit> commits;
 };
 Extension extendLap2(const core::VerifierConfig& cfg, int seeds, int shift) {
   int64_t per_lap = 0;
@@ -615,7 +622,9 @@ Extension extendLap2(const core::VerifierConfig& cfg, int seeds, int shift) {
       }
       const Verdict t = v.verify(c);
       if (t.accepted) {
+        const double before = v.driftScale();
         EXPECT_TRUE(v.commit(c).ok);
+        out.commits.push_back({t.detail.find("extends") != std::string::npos, before, v.driftScale()});
       }
       out.truth.push_back(t);
     }
@@ -650,6 +659,34 @@ TEST(RevisitRule, ARevisitsLaterLoopsAreJudgedByItsAcceptedLoopsNotByTheDriftedE
   core::VerifierConfig tight = on;
   tight.revisit.revisit_extend_residual = 0.001;
   EXPECT_EQ(accepted(extendLap2(tight, 3, 0).truth, "extends"), 0);
+}
+
+TEST(RevisitRule, AnExtensionDoesNotTeachTheDriftCalibration) {
+  // An extension is a loop the prior rejected: its innovation is the drift the model ruled out
+  // (or a false row's offset), not a sample of the model's scale. Only loops the prior
+  // confirmed teach it (issue 19: a false row set the scale in the probe). With calibrate_drift
+  // on, the scale is fitted once five loops have taught it: here, where extensions come between
+  // the steady-drift revisit's loops accepted alone, it must first move at the fifth loop
+  // accepted alone, not earlier.
+  core::VerifierConfig cfg = config(core::Decision::kRevisit);
+  cfg.drift.calibrate_drift = true;
+  const Extension r = extendLap2(cfg, 3, 0);
+  int alone = 0, extensions_before = 0;
+  bool moved = false;
+  for (const Extension::Commit& c : r.commits) {
+    if (c.extension) {
+      extensions_before += !moved;
+      EXPECT_EQ(c.before, c.after) << "an extension moved the drift scale";
+    } else {
+      ++alone;
+    }
+    if (c.before != c.after && !moved) {
+      moved = true;
+      EXPECT_EQ(alone, 5) << "the scale first moved at this loop accepted alone";
+    }
+  }
+  EXPECT_TRUE(moved) << "the calibration must be live in this scene";
+  EXPECT_GE(extensions_before, 1) << "the scene must take an extension before the scale is fitted";
 }
 
 TEST(RevisitRule, ALookAlikeBesideTheAcceptedLoopsOfItsRevisitDoesNotExtendIt) {
