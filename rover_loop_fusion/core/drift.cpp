@@ -47,8 +47,8 @@ void ChainMoments::extend(const ChainSteps& steps, size_t n) {
 
 void ChainMoments::addStep(const ChainSteps& steps, size_t j, Sums* s) {
   // The same sums, term by term, as adding a Sums of the one step (each term rounded as it
-  // would be there: the step's own moments first, then their addition), without the
-  // temporaries: the prefix sums of a whole-run trial's scoring are most of their cost.
+  // would be there: the step's own moments first, then their addition), without building that
+  // Sums: the temporaries were most of what a prefix sum cost in a whole-run trial's scoring.
   if (j == 0) return;
   const Eigen::Matrix4d S = steps.stepCovariance(j);
   const Eigen::Vector3d pj = steps.position(j);
