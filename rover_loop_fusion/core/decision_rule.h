@@ -31,9 +31,8 @@ struct Decided {
   TrialSolution solution;                                     ///< metric: the trial's X*
   Eigen::Vector4d innovation = Eigen::Vector4d::Zero();       ///< chi2: for the calibration
   Eigen::Matrix4d chain_covariance = Eigen::Matrix4d::Zero(); ///< chi2, at variance scale 1
-  /// Its innovation teaches the drift calibration when the loop is committed (learn()): false
-  /// for a loop the prior did not confirm (a revisit extension), whose innovation is the drift
-  /// the prior ruled out, or a false row's offset.
+  /// Its innovation teaches the drift calibration when the loop is committed (learn()): set by
+  /// Verifier::verify, false for a loop the prior did not confirm (a revisit extension).
   bool calibrates = true;
 };
 

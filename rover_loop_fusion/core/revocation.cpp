@@ -76,7 +76,6 @@ bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, 
     s << "; its trial converged (score " << measured->score << " m)";
   }
   *detail = s.str();
-  decided->calibrates = false;  // the prior rejected it: its innovation says nothing about the drift scale
   return true;
 }
 

@@ -132,6 +132,9 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   pending_.candidate = c;
   pending_.revision = graph_.revision();
   pending_.decided = std::move(decided);
+  // Only a loop the prior confirmed teaches the drift calibration; an extension's innovation is
+  // the drift the prior ruled out, or a false row's offset.
+  pending_.decided.calibrates = out.check.passed;
   return withNumbers(Verdict::Accept(c, out.check.passed ? out.check.detail : extended), measured, t0);
 }
 
