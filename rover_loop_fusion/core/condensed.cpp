@@ -13,25 +13,39 @@ namespace core {
 
 using condensed_detail::orderedColumns;
 
+namespace {
+/// wrapAngle without its sine, cosine and arctangent for an angle already in [-pi, pi] (nearly
+/// every yaw residual and update of a solve; wrapAngle would return it to within a rounding).
+double wrapNear(double a) { return a >= -M_PI && a <= M_PI ? a : wrapAngle(a); }
+}  // namespace
+
 int CondensedGraph::addAnchor(const AnchorState& state, double pitch, double roll, bool fixed) {
   states_.push_back(state);
-  pitch_.push_back(pitch);
-  roll_.push_back(roll);
+  pitch_roll_trig_.emplace_back(std::cos(pitch), std::sin(pitch), std::cos(roll), std::sin(roll));
   fixed_.push_back(fixed);
   return static_cast<int>(states_.size()) - 1;
 }
 
-bool CondensedGraph::addEdge(const CondensedEdge& edge) {
-  const Eigen::Matrix4d C = 0.5 * (edge.covariance + edge.covariance.transpose());
+bool CondensedGraph::sqrtInformation(const Eigen::Matrix4d& covariance, Eigen::Matrix4d* sqrt_info) {
+  const Eigen::Matrix4d C = 0.5 * (covariance + covariance.transpose());
   if (!C.allFinite()) return false;
   Eigen::LLT<Eigen::Matrix4d> llt(C);
   if (llt.info() != Eigen::Success) return false;
   // information = C^-1 = L^-T L^-1 (C = L L^T): sqrt information = L^-1.
-  const Eigen::Matrix4d Linv = llt.matrixL().solve(Eigen::Matrix4d::Identity());
-  if (!Linv.allFinite()) return false;
-  edges_.push_back(edge);
-  sqrt_info_.push_back(Linv);
+  *sqrt_info = llt.matrixL().solve(Eigen::Matrix4d::Identity());
+  return sqrt_info->allFinite();
+}
+
+bool CondensedGraph::addEdge(const CondensedEdge& edge) {
+  Eigen::Matrix4d Linv;
+  if (!sqrtInformation(edge.covariance, &Linv)) return false;
+  addEdge(edge, Linv);
   return true;
+}
+
+void CondensedGraph::addEdge(const CondensedEdge& edge, const Eigen::Matrix4d& sqrt_info) {
+  edges_.push_back(edge);
+  sqrt_info_.push_back(sqrt_info);
 }
 
 CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
@@ -57,7 +71,13 @@ CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
 }
 
 Eigen::Matrix3d CondensedGraph::rotationOf(int anchor) const {
-  return yawPitchRollToRotation(states_[anchor].yaw, pitch_[anchor], roll_[anchor]);
+  const double yaw = states_[anchor].yaw;
+  const Eigen::Vector4d& pr = pitch_roll_trig_[anchor];
+  double R[9];
+  rotationFromCosSin(std::cos(yaw), std::sin(yaw), pr[0], pr[1], pr[2], pr[3], R);
+  Eigen::Matrix3d M;
+  M << R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8];
+  return M;
 }
 
 Eigen::Vector4d CondensedGraph::residual(size_t e) const { return residual(e, rotationOf(edges_[e].from)); }
@@ -68,7 +88,7 @@ Eigen::Vector4d CondensedGraph::residual(size_t e, const Eigen::Matrix3d& Ra) co
   const AnchorState& b = states_[ed.to];
   Eigen::Vector4d r;
   r.head<3>() = Ra.transpose() * (b.p - a.p) - ed.t;
-  r[3] = wrapAngle(b.yaw - a.yaw - ed.yaw);
+  r[3] = wrapNear(b.yaw - a.yaw - ed.yaw);
   return r;
 }
 
@@ -109,7 +129,7 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* 
       [this](size_t e) { return linearise(e); },
       [this](size_t i, const Eigen::Ref<const Eigen::Vector4d>& dx) {
         states_[i].p += dx.head<3>();
-        states_[i].yaw = wrapAngle(states_[i].yaw + dx[3]);
+        states_[i].yaw = wrapNear(states_[i].yaw + dx[3]);
       });
 }
 

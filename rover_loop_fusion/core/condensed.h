@@ -50,6 +50,12 @@ class CondensedGraph {
   int addAnchor(const AnchorState& state, double pitch, double roll, bool fixed);
   /// False (and nothing added) if the covariance is not symmetric positive definite.
   bool addEdge(const CondensedEdge& edge);
+  /// The same with the square-root information of its covariance already known
+  /// (sqrtInformation() of edge.covariance).
+  void addEdge(const CondensedEdge& edge, const Eigen::Matrix4d& sqrt_info);
+  /// L^-1 of the covariance's Cholesky factor L (L^-T L^-1 = covariance^-1), of its symmetric
+  /// part; false if that is not positive definite or not finite.
+  static bool sqrtInformation(const Eigen::Matrix4d& covariance, Eigen::Matrix4d* sqrt_info);
   size_t anchorCount() const { return states_.size(); }
   size_t edgeCount() const { return edges_.size(); }
   const AnchorState& state(int i) const { return states_[i]; }
@@ -89,7 +95,8 @@ class CondensedGraph {
   Eigen::Matrix3d rotationOf(int anchor) const;
 
   std::vector<AnchorState> states_;
-  std::vector<double> pitch_, roll_;
+  // Per anchor: the cosine and sine of its pitch, then of its roll (fixed; rotationOf).
+  std::vector<Eigen::Vector4d, Eigen::aligned_allocator<Eigen::Vector4d>> pitch_roll_trig_;
   std::vector<bool> fixed_;
   std::vector<CondensedEdge> edges_;
   std::vector<Eigen::Matrix4d> sqrt_info_;  // upper L with L^T L = covariance^-1

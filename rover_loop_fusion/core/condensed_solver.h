@@ -242,32 +242,50 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
   NormalMatrix<B> H(edges, col, n);
   bool refactor = true;
   double previous_step = std::numeric_limits<double>::infinity();
+  // Edge e linearised at the current states and reweighted by its Huber loss; its cost (the
+  // Huber loss's where it applies) added to *cost.
+  auto weighted = [&](size_t e, double* cost) {
+    auto L = linearise(e);  // r, Ja, Jb: Eigen fixed-size (B) vector and matrices
+    const Edge& ed = edges[e];
+    const double chi2 = L.r.squaredNorm();
+    *cost += chi2;
+    if (ed.huber > 0) {  // IRLS: the Huber loss's rho'(s) = delta / sqrt(s) beyond delta^2
+      const int count = std::max(1, ed.count);
+      const double s = chi2 / count;
+      if (s > ed.huber * ed.huber) {
+        *cost += count * (2.0 * ed.huber * std::sqrt(s) - ed.huber * ed.huber) - chi2;
+        const double w = std::sqrt(ed.huber / std::sqrt(s));
+        L.r *= w;
+        L.Ja *= w;
+        L.Jb *= w;
+      }
+    }
+    return L;
+  };
   for (it = 1; it <= max_iterations; ++it) {
-    H.setZero();
+    // An iteration that tries the last factorisation first (a chord step) assembles the
+    // gradient alone; the matrix only if the chord step is not taken (assemble()).
+    const bool assembled = refactor;
+    if (assembled) H.setZero();
     Eigen::VectorXd g = Eigen::VectorXd::Zero(B * n);
     double cost = 0.0;
     for (size_t e = 0; e < edges.size(); ++e) {
-      auto L = linearise(e);  // r, Ja, Jb: Eigen fixed-size (B) vector and matrices
+      const auto L = weighted(e, &cost);
       const Edge& ed = edges[e];
-      const double chi2 = L.r.squaredNorm();
-      cost += chi2;
-      if (ed.huber > 0) {  // IRLS: the Huber loss's rho'(s) = delta / sqrt(s) beyond delta^2
-        const int count = std::max(1, ed.count);
-        const double s = chi2 / count;
-        if (s > ed.huber * ed.huber) {
-          cost += count * (2.0 * ed.huber * std::sqrt(s) - ed.huber * ed.huber) - chi2;
-          const double w = std::sqrt(ed.huber / std::sqrt(s));
-          L.r *= w;
-          L.Ja *= w;
-          L.Jb *= w;
-        }
-      }
       const Eigen::Matrix<double, B, B>* J[2] = {&L.Ja, &L.Jb};
       const int c[2] = {col[ed.from], col[ed.to]};
       for (int u = 0; u < 2; ++u)
         if (c[u] >= 0) g.template segment<B>(B * c[u]) += J[u]->transpose() * L.r;
-      H.add(e, L.Ja, L.Jb);
+      if (assembled) H.add(e, L.Ja, L.Jb);
     }
+    auto assemble = [&] {  // the same blocks, added in the same order
+      H.setZero();
+      double unused = 0.0;
+      for (size_t e = 0; e < edges.size(); ++e) {
+        const auto L = weighted(e, &unused);
+        H.add(e, L.Ja, L.Jb);
+      }
+    };
     if (function_tolerance > 0 && previous_cost >= 0 &&
         std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
       if (converged) *converged = true;
@@ -283,6 +301,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
       if (!taken) dx = -g;
     }
     if (!taken) {  // Gauss-Newton's step
+      if (!assembled) assemble();
       if (!ldlt.factorize(H)) {
         *ok = false;
         return it;

@@ -25,13 +25,11 @@ T wrapAngleDiff(const T& a) {
   return a;
 }
 
-/// R = Rz(yaw) * Ry(pitch) * Rx(roll), row-major, radians. A template for autodiff.
+/// R = Rz(yaw) * Ry(pitch) * Rx(roll), row-major, from the cosines and sines of the three
+/// angles (what yawPitchRollToRotation computes them into; the condensed graphs keep pitch's and
+/// roll's, which do not change, and compute only yaw's per linearisation).
 template <typename T>
-void yawPitchRollToRotation(const T& yaw, const T& pitch, const T& roll, T R[9]) {
-  using std::cos;
-  using std::sin;
-  const T cy = cos(yaw), sy = sin(yaw), cp = cos(pitch), sp = sin(pitch), cr = cos(roll),
-          sr = sin(roll);
+void rotationFromCosSin(const T& cy, const T& sy, const T& cp, const T& sp, const T& cr, const T& sr, T R[9]) {
   R[0] = cy * cp;
   R[1] = -sy * cr + cy * sp * sr;
   R[2] = sy * sr + cy * sp * cr;
@@ -41,6 +39,14 @@ void yawPitchRollToRotation(const T& yaw, const T& pitch, const T& roll, T R[9])
   R[6] = -sp;
   R[7] = cp * sr;
   R[8] = cp * cr;
+}
+
+/// R = Rz(yaw) * Ry(pitch) * Rx(roll), row-major, radians. A template for autodiff.
+template <typename T>
+void yawPitchRollToRotation(const T& yaw, const T& pitch, const T& roll, T R[9]) {
+  using std::cos;
+  using std::sin;
+  rotationFromCosSin(T(cos(yaw)), T(sin(yaw)), T(cos(pitch)), T(sin(pitch)), T(cos(roll)), T(sin(roll)), R);
 }
 
 inline Eigen::Matrix3d yawPitchRollToRotation(double yaw, double pitch, double roll) {

@@ -1,12 +1,15 @@
 // The condensed graphs' linear algebra (core/condensed_solver.h): the block LDL^T of the normal
 // matrix solves what a dense factorisation of the same matrix solves, for 4x4 and 6x6 blocks,
 // in the fill-reducing order of orderedColumns(), and says so when the system is singular.
+#include "rover_loop_fusion/core/condensed.h"
 #include "rover_loop_fusion/core/condensed6.h"
 #include "rover_loop_fusion/core/condensed_solver.h"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+
+#include <cmath>
 
 #include <random>
 #include <vector>
@@ -162,4 +165,86 @@ TEST(CondensedSolver, ChordStepsSolveAGraphTornByAFalseLoopAsGaussNewtonDoes) {
     EXPECT_LT(far, 1e-6) << "chord " << chord;
     EXPECT_GT((newton.state(n - 1).p - pose(n - 1).p).norm(), 1.0) << "the loop tore the ring";
   }
+}
+
+TEST(CondensedSolver, FourDofRingWhoseYawsCrossPiSolvesWithChordStepsAsGaussNewton) {
+  // A 4-DoF ring of 60 anchors (yaws a + pi/2 in [-pi, pi], crossing +pi -> -pi; the loop's
+  // measured yaw is its true one + 2 pi), tilted by
+  // a small pitch and roll, drifted (a yaw error that grows along the ring, and a shift), closed
+  // by a true loop with loop_fusion's Huber weighting. The yaw residuals must wrap (the
+  // condensed graph skips wrapAngle's trigonometry only for angles already in [-pi, pi]), and
+  // the chord steps (the matrix assembled only when a factorisation is needed) must reach
+  // Gauss-Newton's solution: the true ring, up to the gauge of anchor 0.
+  const int n = 60;
+  auto wrap = [](double a) { return std::atan2(std::sin(a), std::cos(a)); };
+  auto truth = [&](int i) {
+    const double a = 2.0 * M_PI * i / n;
+    core::AnchorState s;
+    s.p = Eigen::Vector3d(8.0 * std::cos(a), 8.0 * std::sin(a), 0.02 * i);
+    s.yaw = wrap(a + M_PI / 2);
+    return s;
+  };
+  const double pitch = 0.03, roll = -0.02;
+  auto rotation = [&](double yaw) {
+    return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+            Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+        .toRotationMatrix();
+  };
+  auto edge = [&](int from, int to) {
+    core::CondensedEdge e;
+    e.from = from;
+    e.to = to;
+    e.t = rotation(truth(from).yaw).transpose() * (truth(to).p - truth(from).p);
+    e.yaw = wrap(truth(to).yaw - truth(from).yaw);
+    return e;
+  };
+  auto build = [&]() {
+    core::CondensedGraph g;
+    for (int i = 0; i < n; ++i) {
+      core::AnchorState s = truth(i);
+      s.yaw = wrap(s.yaw + 0.004 * i);  // drift
+      s.p += Eigen::Vector3d(0.01 * i, -0.005 * i, 0.0);
+      g.addAnchor(s, pitch, roll, i == 0);
+    }
+    for (int i = 1; i < n; ++i) {
+      core::CondensedEdge e = edge(i - 1, i);
+      e.covariance = Eigen::Matrix4d::Identity() * 1e-2;
+      e.covariance(3, 3) = 1e-4;
+      EXPECT_TRUE(g.addEdge(e));
+    }
+    core::CondensedEdge loop = edge(n - 1, 0);
+    loop.yaw = truth(0).yaw - truth(n - 1).yaw + 2.0 * M_PI;  // the same yaw, not wrapped
+    loop.covariance = Eigen::Matrix4d::Identity() * 1e-4;
+    loop.huber = 0.1;
+    EXPECT_TRUE(g.addEdge(loop));
+    return g;
+  };
+  {
+    // Drifted, anchor 14's yaw is pi - 0.049 and anchor 15's -pi + 0.060: edge 14 -> 15 measures
+    // 0.105, so its yaw residual is -2 pi + 0.004 before wrapping, 0.004 (the drift step) after.
+    const core::CondensedGraph g = build();
+    ASSERT_GT(g.state(14).yaw, 3.0);
+    ASSERT_LT(g.state(15).yaw, -3.0);
+    EXPECT_NEAR(g.residual(14)[3], 0.004, 1e-9);
+    EXPECT_NEAR(g.residual(n - 1)[3], -0.004 * (n - 1), 1e-9) << "the loop's, measured as its yaw + 2 pi";
+  }
+  core::CondensedGraph newton = build(), chorded = build();
+  bool ok_n = false, ok_c = false, conv_n = false, conv_c = false;
+  newton.solve(200, 1e-10, &ok_n, &conv_n, 0.0, 0.0);
+  chorded.solve(200, 1e-10, &ok_c, &conv_c, 0.0, 0.5);
+  ASSERT_TRUE(ok_n && conv_n) << "the reference solve";
+  ASSERT_TRUE(ok_c && conv_c) << "chord steps: ok " << ok_c << " converged " << conv_c;
+  double far = 0.0, off_truth = 0.0, yaw_off = 0.0;
+  for (int i = 0; i < n; ++i) {
+    far = std::max(far, (newton.state(i).p - chorded.state(i).p).norm());
+    far = std::max(far, std::abs(wrap(newton.state(i).yaw - chorded.state(i).yaw)));
+    off_truth = std::max(off_truth, (chorded.state(i).p - truth(i).p).norm());
+    yaw_off = std::max(yaw_off, std::abs(wrap(chorded.state(i).yaw - truth(i).yaw)));
+    EXPECT_GE(chorded.state(i).yaw, -M_PI);
+    EXPECT_LE(chorded.state(i).yaw, M_PI);
+  }
+  EXPECT_LT(far, 1e-8);
+  EXPECT_LT(off_truth, 1e-6) << "every edge is consistent with the true ring: the solve must find it";
+  EXPECT_LT(yaw_off, 1e-8);
+  for (size_t e = 0; e < chorded.edgeCount(); ++e) EXPECT_LT(chorded.residual(e).norm(), 1e-6) << "edge " << e;
 }
