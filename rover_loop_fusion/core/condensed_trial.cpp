@@ -28,6 +28,9 @@ namespace {
 /// cluster join it: one edge in the condensed graph (the middle loop, with the information of
 /// all of them). A long revisit becomes one edge per kMergeKeyframes.
 constexpr size_t kMergeKeyframes = 10;
+/// Chain edges kept for the next condensed graphs at most (condense(); ~330 bytes each): a
+/// whole-run trial has up to 2 trial_loop_anchors + 3 of them.
+constexpr size_t kChainEdgeCache = 8192;
 /// A commit re-places the keyframes of a chain only if one of its ends moved more than this.
 constexpr double kSpreadTranslation = 1e-4;  // m
 constexpr double kSpreadYaw = 1e-6;          // rad
@@ -146,16 +149,27 @@ bool KeyframeGraph::Impl::condense(int component, const std::vector<size_t>& ext
     const Keyframe& ka = kfs[a[i - 1]];
     const Keyframe& kb = kfs[a[i]];
     if (ka.segment != kb.segment || (o.trial && a[i - 1] < o.first)) continue;
-    SequenceChain& ch = chains.at(ka.segment);
+    const ChainEdgeKey key(a[i - 1], a[i], o.trial, o.trial ? 0.0 : o.variance_scale);
+    auto cached = chain_edges.find(key);
+    if (cached == chain_edges.end()) {
+      SequenceChain& ch = chains.at(ka.segment);
+      ChainEdge c;
+      const Eigen::Matrix3d Ra = ka.vio.q.toRotationMatrix();
+      c.t = Ra.transpose() * (kb.vio.t - ka.vio.t);
+      c.yaw = wrapAngle(kb.yaw - ka.yaw);
+      c.covariance = o.trial ? unitOf(ch).relative(a[i - 1] - ch.start, a[i] - ch.start, Ra)
+                             : o.variance_scale * momentsOf(ch).relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
+      if (!CondensedGraph::sqrtInformation(c.covariance, &c.sqrt_info)) return false;
+      if (chain_edges.size() >= kChainEdgeCache) chain_edges.clear();
+      cached = chain_edges.emplace(key, c).first;
+    }
     CondensedEdge e;
     e.from = static_cast<int>(i - 1);
     e.to = static_cast<int>(i);
-    const Eigen::Matrix3d Ra = ka.vio.q.toRotationMatrix();
-    e.t = Ra.transpose() * (kb.vio.t - ka.vio.t);
-    e.yaw = wrapAngle(kb.yaw - ka.yaw);
-    e.covariance = o.trial ? unitOf(ch).relative(a[i - 1] - ch.start, a[i] - ch.start, Ra)
-                           : o.variance_scale * momentsOf(ch).relative(a[i - 1] - ch.start, a[i] - ch.start, Ra);
-    if (!cg->addEdge(e)) return false;
+    e.t = cached->second.t;
+    e.yaw = cached->second.yaw;
+    e.covariance = cached->second.covariance;
+    cg->addEdge(e, cached->second.sqrt_info);
   }
   const Eigen::Matrix4d L = o.trial ? unitLoopCovariance() : loopCovariance();
   for (const LoopRep& r : reps) {

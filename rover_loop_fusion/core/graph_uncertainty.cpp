@@ -47,6 +47,7 @@ KeyframeGraph::Impl::ChainMomentsView KeyframeGraph::Impl::unitOf(SequenceChain&
 }
 
 void KeyframeGraph::Impl::rebuildMoments(int sequence) {
+  chain_edges.clear();  // the sequence's VIO poses moved
   for (auto& kv : chains) {
     if (kfs[kv.second.start].sequence != sequence) continue;
     kv.second.moments.clear();

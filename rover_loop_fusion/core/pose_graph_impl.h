@@ -326,6 +326,20 @@ struct KeyframeGraph::Impl {
   };
   bool condense(int component, const std::vector<size_t>& extra, const CondenseOptions& options,
                 CondensedGraph* cg, std::vector<size_t>* anchors) const;
+  /// condense()'s chain edges, by their two positions, the weighting (unit: the trials') and
+  /// the variance scale: the measurement, covariance and square-root information of a chain
+  /// of odometry depend only on the VIO poses along it, which change only when a sequence is
+  /// anchored (rebuildMoments() clears this). Most chains of a condensed graph are those of
+  /// the one before (the same loop ends), so a trial builds only the few a new anchor splits.
+  struct ChainEdge {
+    Eigen::Vector3d t;
+    double yaw;
+    Eigen::Matrix4d covariance, sqrt_info;
+  };
+  using ChainEdgeKey = std::tuple<size_t, size_t, bool, double>;
+  mutable std::map<ChainEdgeKey, ChainEdge, std::less<ChainEdgeKey>,
+                   Eigen::aligned_allocator<std::pair<const ChainEdgeKey, ChainEdge>>>
+      chain_edges;
   /// The anchors of a condensed graph (positions, increasing: `extra` and the ends of the loops
   /// returned, loopReps()).
   std::vector<LoopRep> condensedAnchors(int component, const std::vector<size_t>& extra,

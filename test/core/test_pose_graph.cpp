@@ -252,3 +252,75 @@ TEST(KeyframeGraph, KeptMomentsAreTheMomentsBuiltOnFirstUse) {
     EXPECT_EQ(a, m) << from;
   }
 }
+
+TEST(KeyframeGraph, CondensedGraphsFromKeptChainEdgesEqualThoseBuiltAfresh) {
+  // condense() keeps each chain edge it builds for the next condensed graphs. Two graphs of the
+  // same keyframes and loops: `warm` asked for condensed graphs (both kinds: the drift model's
+  // at two variance scales and the trials' unit weighting) before and between the loops, `cold`
+  // only at the end. Every covariance and trial must be the same to the bit, also after the
+  // first loop into sequence 2 has moved that sequence's VIO poses (anchoring it).
+  core::VerifierConfig config;
+  config.trial.condense_min_window = 50;
+  core::KeyframeGraph warm(config), cold(config);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  double yaw = 0.0;
+  const int n = 400;
+  for (int i = 0; i < n; ++i) {
+    if (i == 250) t = Eigen::Vector3d(30, 5, 0);
+    yaw += 0.05 * unit(rng);
+    t += Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::Vector3d(0.3, 0.05 * unit(rng), 0.01 * unit(rng));
+    const Eigen::Quaterniond q(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+    for (core::KeyframeGraph* g : {&warm, &cold}) ASSERT_TRUE(g->addKeyframe(i, 0.1 * i, i < 250 ? 1 : 2, t, q).ok) << i;
+  }
+  core::LoopCandidate c;
+  c.relative_q = Eigen::Quaterniond(Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitZ()));
+  c.relative_yaw = 0.2;
+  c.relative_t = Eigen::Vector3d(0.4, -0.3, 0.05);
+  auto ask = [&](core::KeyframeGraph& g, std::vector<Eigen::Matrix4d>* out) {
+    // (385, 395): two anchors of sequence 2 next to each other before and after the loops.
+    for (const auto& pair : {std::make_pair(5, 397), std::make_pair(60, 379), std::make_pair(150, 349),
+                             std::make_pair(255, 314), std::make_pair(385, 395)}) {
+      for (double scale : {1.0, 2.5}) {
+        Eigen::Matrix4d C;
+        if (g.relativeCovariance(pair.first, pair.second, scale, &C)) out->push_back(C);
+      }
+    }
+  };
+  auto trial = [&](core::KeyframeGraph& g, size_t match, size_t query) {
+    core::LoopCandidate cand = c;
+    cand.match_index = static_cast<int64_t>(match);
+    cand.query_index = static_cast<int64_t>(query);
+    return g.solveWindow(match, query, &cand, false, 50, 0.0);
+  };
+  std::vector<Eigen::Matrix4d> unused;
+  ask(warm, &unused);
+  trial(warm, 20, 240);
+  for (int k = 0; k < 6; ++k) {
+    c.query_index = 230 + 30 * k;  // k >= 1: into sequence 2 (the first one anchors it)
+    c.match_index = 10 + 35 * k;
+    for (core::KeyframeGraph* g : {&warm, &cold}) ASSERT_TRUE(g->addLoop(c).ok) << k;
+    ask(warm, &unused);
+    trial(warm, 40 + 10 * k, 395);
+  }
+  std::vector<Eigen::Matrix4d> a, b;
+  ask(warm, &a);
+  ask(cold, &b);
+  ASSERT_EQ(a.size(), 10u);
+  ASSERT_EQ(b.size(), a.size());
+  for (size_t i = 0; i < a.size(); ++i) {
+    EXPECT_GT(a[i].trace(), 0.0);
+    EXPECT_EQ(a[i], b[i]) << i;
+  }
+  for (size_t match : {40u, 95u, 180u}) {
+    const core::TrialSolution sw = trial(warm, match, 395), sc = trial(cold, match, 395);
+    ASSERT_TRUE(sw.summary.finite && sc.summary.finite) << match;
+    ASSERT_TRUE(sw.condensed) << "a window of " << 395 - match << " keyframes is condensed";
+    ASSERT_EQ(sw.positions, sc.positions);
+    for (size_t i = 0; i < sw.states.size(); ++i) {
+      for (int k = 0; k < 3; ++k) EXPECT_EQ(sw.states[i].t[k], sc.states[i].t[k]) << match << " anchor " << i;
+      EXPECT_EQ(sw.states[i].yaw, sc.states[i].yaw) << match << " anchor " << i;
+    }
+  }
+}
