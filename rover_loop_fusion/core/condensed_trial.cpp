@@ -381,7 +381,7 @@ class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
  public:
   FourDofPlacer(const Impl& m, const TrialSolution& s) : m_(m), s_(s) {}
 
-  KeyframeState place(size_t i, size_t p) override {
+  KeyframeState place(size_t i, size_t p, bool position_only) override {
     const std::vector<size_t>& a = s_.positions;
     const auto& x = m_.x;
     const auto& kfs = m_.kfs;
@@ -413,7 +413,7 @@ class KeyframeGraph::Impl::FourDofPlacer : public ChainPlacer {
     const Eigen::Vector3d t = Eigen::Vector3d(na.t[0], na.t[1], na.t[2]) + f.D * (xp - xa) + f.M * corr.head<3>();
     KeyframeState st = x[p];
     for (int k = 0; k < 3; ++k) st.t[k] = t[k];
-    st.yaw = wrapAngle(x[p].yaw + f.dyaw + corr[3]);
+    if (!position_only) st.yaw = wrapAngle(x[p].yaw + f.dyaw + corr[3]);
     return st;
   }
 
@@ -435,7 +435,8 @@ std::unique_ptr<KeyframeGraph::Impl::ChainPlacer> KeyframeGraph::Impl::chainPlac
   return std::unique_ptr<ChainPlacer>(new FourDofPlacer(*this, s));
 }
 
-std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, const std::vector<size_t>& targets) const {
+std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, const std::vector<size_t>& targets,
+                                                       bool position_only) const {
   const std::vector<size_t>& a = s.positions;
   std::vector<KeyframeState> out;
   out.reserve(targets.size());
@@ -451,7 +452,7 @@ std::vector<KeyframeState> KeyframeGraph::Impl::expand(const TrialSolution& s, c
     if (left && a[i - 1] == p) {
       out.push_back(s.states[i - 1]);
     } else if (left && right) {
-      out.push_back(between->place(i - 1, p));
+      out.push_back(between->place(i - 1, p, position_only));
     } else if (left) {
       out.push_back(rigid(i - 1, p));
     } else if (right) {

@@ -142,7 +142,7 @@ class KeyframeGraph::Impl::SixDofPlacer : public ChainPlacer {
     m.unitStepVariances6(&st_, &sq_);
   }
 
-  KeyframeState place(size_t i, size_t p) override {
+  KeyframeState place(size_t i, size_t p, bool position_only) override {
     const std::vector<size_t>& a = s_.positions;
     const auto& x = m_.x;
     const size_t pa = a[i], pb = a[i + 1];
@@ -168,6 +168,11 @@ class KeyframeGraph::Impl::SixDofPlacer : public ChainPlacer {
     for (; f.next <= p; ++f.next) f.sums.add(positionOf(x[f.next]) - xa);
     const Vector6d corr = f.sums.cross(positionOf(x[p]) - xa, xb - xa, st_, sq_) * f.w;
     const Eigen::Vector3d t = f.Rc * (positionOf(x[p]) + corr.head<3>()) + f.tc;
+    if (position_only) {
+      KeyframeState st = x[p];
+      for (int k = 0; k < 3; ++k) st.t[k] = t[k];
+      return st;
+    }
     const Eigen::Quaterniond q(f.Rc * rotationExp(corr.tail<3>()).toRotationMatrix() *
                                rotationQ(x[p]).toRotationMatrix());
     return m_.stateWithPose(x[p], t, q);

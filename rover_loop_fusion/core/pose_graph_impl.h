@@ -358,8 +358,9 @@ struct KeyframeGraph::Impl {
   class ChainPlacer {
    public:
     virtual ~ChainPlacer() = default;
-    /// The new state of position p between the solution's anchors i and i + 1 (one segment).
-    virtual KeyframeState place(size_t i, size_t p) = 0;
+    /// The new state of position p between the solution's anchors i and i + 1 (one segment);
+    /// `position_only`: its rotation left as in X (scoring needs the positions alone).
+    virtual KeyframeState place(size_t i, size_t p, bool position_only) = 0;
   };
   /// 4-DoF (condensed_trial.cpp) and 6-DoF (condensed_trial6.cpp); the 6-DoF one wants its
   /// positions p increasing within a chain, as expand() hands them.
@@ -388,7 +389,9 @@ struct KeyframeGraph::Impl {
   /// New states of `targets` (window positions of the component, increasing) under a condensed
   /// solution: between two anchors of a segment the chain's conditional mean (as the linear
   /// solve places them), before the first and after the last anchor rigidly with it.
-  std::vector<KeyframeState> expand(const TrialSolution& s, const std::vector<size_t>& targets) const;
+  /// `position_only` (scoring): between anchors, the rotations are left as in X.
+  std::vector<KeyframeState> expand(const TrialSolution& s, const std::vector<size_t>& targets,
+                                    bool position_only = false) const;
   /// The window of a condensed solution: [begin, end) positions, one range per segment of its
   /// component (skip_fixed_map: not sequence 0's).
   std::vector<std::pair<size_t, size_t>> windowRanges(const TrialSolution& s, bool skip_fixed_map) const;

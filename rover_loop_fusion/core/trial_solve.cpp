@@ -240,7 +240,7 @@ int KeyframeGraph::scoredPositions(const TrialSolution& solution, Eigen::Matrix3
     for (const auto& range : m.windowRanges(solution, true)) n += range.second - range.first;
     const size_t stride = std::max<size_t>(1, (n + kCondensedScoredKeyframes - 1) / kCondensedScoredKeyframes);
     const std::vector<size_t> targets = m.windowPositions(solution, stride, true);
-    const std::vector<KeyframeState> states = m.expand(solution, targets);
+    const std::vector<KeyframeState> states = m.expand(solution, targets, true);
     before->resize(3, targets.size());
     after->resize(3, targets.size());
     for (size_t k = 0; k < targets.size(); ++k) {
