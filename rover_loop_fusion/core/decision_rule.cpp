@@ -206,19 +206,20 @@ class RevisitRule : public MetricRule {
     RuleOutcome out;
     // The fast path: the paper's test, as decision metric.
     out.check = metricDecision(cfg_, g_, c, qpos, mpos, -1, t0, measured, &decided->solution);
+    // Held: only a candidate whose trial bent the trajectory too far for the metric threshold.
+    // The innovation gate stays a hard filter (holding what it rejects let rows of near
+    // look-alikes in on the pose graphs' tuning cases: docs/design-notes.md), and a trial that
+    // gave no answer is no evidence either way: fail closed. Those need no prior (an extension
+    // of accepted loops does not teach the calibration, the one use of it past this point).
+    if (!out.check.passed && out.check.reason != Reason::kScoreAboveThreshold) return out;
     Eigen::Vector4d nu;
     Eigen::Matrix4d C;
     const bool prior = drift(c, qpos, mpos, &nu, &C);
-    if (prior) {
+    if (prior) {  // what an accepted loop teaches the calibration when it is committed (learn())
       decided->innovation = nu;
       decided->chain_covariance = C / calibration_.scale();
     }
     if (out.check.passed) return out;
-    // Held: only a candidate whose trial bent the trajectory too far for the metric threshold.
-    // The innovation gate stays a hard filter (holding what it rejects let rows of near
-    // look-alikes in on the pose graphs' tuning cases: docs/design-notes.md), and a trial that
-    // gave no answer is no evidence either way: fail closed.
-    if (out.check.reason != Reason::kScoreAboveThreshold) return out;
     if (!prior) {
       out.check.detail += "; no covariance of the relative pose (the condensed graph is singular)";
       return out;
