@@ -94,6 +94,23 @@ Eigen::Matrix4d ChainMoments::cross(const ChainSteps& steps, const Sums& prefix_
   const Eigen::Vector3d pb = steps.position(b);
   // sum W_yy (pk - pj)(pb - pj)^T
   const Eigen::Matrix3d Sdd = s.c * pk * pb.transpose() - pk * s.cp.transpose() - s.cp * pb.transpose() + s.Cpp;
+  if (s.b.isZero(0.0) && s.Bp.isZero(0.0)) {
+    // No translation-yaw cross terms (loop_fusion's unit weighting, the drift model's steps):
+    // the same values as the general form below, whose terms in b and Bp are exact zeros there,
+    // and E M E^T written out (E's entries are 0 and +-1: the products are exact).
+    C.topLeftCorner<3, 3>() = s.A;
+    C(0, 0) += Sdd(1, 1);
+    C(0, 1) += -Sdd(1, 0);
+    C(1, 0) += -Sdd(0, 1);
+    C(1, 1) += Sdd(0, 0);
+    const Eigen::Vector3d vk = s.c * pk - s.cp, vb = s.c * pb - s.cp;
+    C(0, 3) = -vk[1];
+    C(1, 3) = vk[0];
+    C(3, 0) = -vb[1];
+    C(3, 1) = vb[0];
+    C(3, 3) = s.c;
+    return C;
+  }
   C.topLeftCorner<3, 3>() = s.A + E * (pk * s.b.transpose() - s.Bp.transpose()) +
                             (s.b * pb.transpose() - s.Bp) * E.transpose() + E * Sdd * E.transpose();
   C.topRightCorner<3, 1>() = s.b + E * (s.c * pk - s.cp);
