@@ -64,16 +64,25 @@ class NormalMatrix {
 
   template <class Edge>
   NormalMatrix(const std::vector<Edge>& edges, const std::vector<int>& col, int n) : n_(n) {
-    std::vector<std::vector<int>> rows(n);  // per block column: its block rows (upper: row <= column)
-    for (int j = 0; j < n; ++j) rows[j].push_back(j);
+    // Per block column its block rows (upper: row <= column), the diagonal included: counted,
+    // placed in one array, then sorted and made unique per column (no vector per column).
+    std::vector<int> first(n + 1, 0);
+    for (int j = 0; j < n; ++j) ++first[j + 1];
+    for (const Edge& e : edges) forUpperBlocks(col[e.from], col[e.to], [&](int, int, int, int cv) { ++first[cv + 1]; });
+    for (int j = 0; j < n; ++j) first[j + 1] += first[j];
+    std::vector<int> all(first[n]), fill(first.begin(), first.end() - 1);
+    for (int j = 0; j < n; ++j) all[fill[j]++] = j;
     for (const Edge& e : edges)
-      forUpperBlocks(col[e.from], col[e.to], [&](int, int, int cu, int cv) { rows[cv].push_back(cu); });
+      forUpperBlocks(col[e.from], col[e.to], [&](int, int, int cu, int cv) { all[fill[cv]++] = cu; });
     start_.assign(n + 1, 0);
+    row_.reserve(all.size());
     for (int j = 0; j < n; ++j) {
-      std::sort(rows[j].begin(), rows[j].end());
-      rows[j].erase(std::unique(rows[j].begin(), rows[j].end()), rows[j].end());
-      start_[j + 1] = start_[j] + static_cast<int>(rows[j].size());
-      row_.insert(row_.end(), rows[j].begin(), rows[j].end());
+      int* begin = all.data() + first[j];
+      int* end = all.data() + first[j + 1];
+      std::sort(begin, end);
+      end = std::unique(begin, end);
+      row_.insert(row_.end(), begin, end);
+      start_[j + 1] = static_cast<int>(row_.size());
     }
     values_.assign(row_.size(), Block::Zero());
     offsets_.assign(edges.size() * 4, -1);  // per edge and block (u, v): its value index
