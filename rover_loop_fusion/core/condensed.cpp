@@ -73,11 +73,7 @@ CondensedGraph::Linearised CondensedGraph::linearise(size_t e) const {
 Eigen::Matrix3d CondensedGraph::rotationOf(int anchor) const {
   const double yaw = states_[anchor].yaw;
   const Eigen::Vector4d& pr = pitch_roll_trig_[anchor];
-  double R[9];
-  rotationFromCosSin(std::cos(yaw), std::sin(yaw), pr[0], pr[1], pr[2], pr[3], R);
-  Eigen::Matrix3d M;
-  M << R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8];
-  return M;
+  return rotationFromCosSin(std::cos(yaw), std::sin(yaw), pr[0], pr[1], pr[2], pr[3]);
 }
 
 Eigen::Vector4d CondensedGraph::residual(size_t e) const { return residual(e, rotationOf(edges_[e].from)); }

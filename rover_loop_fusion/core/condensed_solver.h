@@ -271,6 +271,16 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
     }
     return L;
   };
+  // The matrix at the current states, when a chord step was tried and not taken: the same
+  // blocks the gradient pass computed, added in the same order.
+  auto assemble = [&] {
+    H.setZero();
+    double unused = 0.0;
+    for (size_t e = 0; e < edges.size(); ++e) {
+      const auto L = weighted(e, &unused);
+      H.add(e, L.Ja, L.Jb);
+    }
+  };
   for (it = 1; it <= max_iterations; ++it) {
     // An iteration that tries the last factorisation first (a chord step) assembles the
     // gradient alone; the matrix only if the chord step is not taken (assemble()).
@@ -287,14 +297,6 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
         if (c[u] >= 0) g.template segment<B>(B * c[u]) += J[u]->transpose() * L.r;
       if (assembled) H.add(e, L.Ja, L.Jb);
     }
-    auto assemble = [&] {  // the same blocks, added in the same order
-      H.setZero();
-      double unused = 0.0;
-      for (size_t e = 0; e < edges.size(); ++e) {
-        const auto L = weighted(e, &unused);
-        H.add(e, L.Ja, L.Jb);
-      }
-    };
     if (function_tolerance > 0 && previous_cost >= 0 &&
         std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
       if (converged) *converged = true;

@@ -89,7 +89,6 @@ Eigen::Matrix4d ChainMoments::cross(const ChainSteps& steps, const Sums& prefix_
   if (k <= a) return C;
   Sums s = prefix(steps, k);
   s.add(prefix_a, -1.0);
-  const Eigen::Matrix3d E = yawGenerator();
   const Eigen::Vector3d pk = steps.position(k);
   const Eigen::Vector3d pb = steps.position(b);
   // sum W_yy (pk - pj)(pb - pj)^T
@@ -111,6 +110,7 @@ Eigen::Matrix4d ChainMoments::cross(const ChainSteps& steps, const Sums& prefix_
     C(3, 3) = s.c;
     return C;
   }
+  const Eigen::Matrix3d E = yawGenerator();
   C.topLeftCorner<3, 3>() = s.A + E * (pk * s.b.transpose() - s.Bp.transpose()) +
                             (s.b * pb.transpose() - s.Bp) * E.transpose() + E * Sdd * E.transpose();
   C.topRightCorner<3, 1>() = s.b + E * (s.c * pk - s.cp);

@@ -49,12 +49,18 @@ void yawPitchRollToRotation(const T& yaw, const T& pitch, const T& roll, T R[9])
   rotationFromCosSin(T(cos(yaw)), T(sin(yaw)), T(cos(pitch)), T(sin(pitch)), T(cos(roll)), T(sin(roll)), R);
 }
 
-inline Eigen::Matrix3d yawPitchRollToRotation(double yaw, double pitch, double roll) {
+/// rotationFromCosSin as a matrix.
+inline Eigen::Matrix3d rotationFromCosSin(double cy, double sy, double cp, double sp, double cr, double sr) {
   double R[9];
-  yawPitchRollToRotation(yaw, pitch, roll, R);
+  rotationFromCosSin(cy, sy, cp, sp, cr, sr, R);
   Eigen::Matrix3d M;
   M << R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8];
   return M;
+}
+
+inline Eigen::Matrix3d yawPitchRollToRotation(double yaw, double pitch, double roll) {
+  return rotationFromCosSin(std::cos(yaw), std::sin(yaw), std::cos(pitch), std::sin(pitch), std::cos(roll),
+                            std::sin(roll));
 }
 
 /// Yaw, pitch, roll (radians, Z-Y-X) of a rotation matrix.
