@@ -8,6 +8,8 @@
 #   ./scripts/bench.sh agreement [--quick] ... the condensed trial's decisions against the full trial's
 #                                             on every family (scripts/bench/agreement.py)
 #   ./scripts/bench.sh identity build|run|compare  every family's verdicts, timing aside, for two builds
+#   ./scripts/bench.sh cost_ab save DIR | run --old DIR  the cost benchmark of two builds in turn, verdicts
+#                                             compared, summed verify_ms side by side (scripts/bench/cost_ab.py)
 #   ./scripts/bench.sh robustness [--split test|tuning] [--set K=V]  the +-10 % threshold and gate
 #                                             settings per case, recall spread (scripts/bench/robustness.py)
 #   ./scripts/bench.sh sweep ...              scripts/threshold_sweep.py (tuning cases only)
@@ -19,8 +21,8 @@
 set -euo pipefail
 family="${1:-}"
 case "$family" in
-  poc|real|posegraph|cost|long_replay|fault_replay|agreement|identity|robustness|all|sweep|evaluate|diagnostics) shift ;;
-  *) echo "usage: $0 poc|real|posegraph|cost|long_replay|fault_replay|agreement|identity|robustness|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
+  poc|real|posegraph|cost|cost_ab|long_replay|fault_replay|agreement|identity|robustness|all|sweep|evaluate|diagnostics) shift ;;
+  *) echo "usage: $0 poc|real|posegraph|cost|cost_ab|long_replay|fault_replay|agreement|identity|robustness|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
 esac
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 source "$ROVER_ROOT/scripts/venv.sh"
