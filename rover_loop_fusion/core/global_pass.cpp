@@ -61,9 +61,18 @@ double tlsWeight(double r2, double c2, double mu) {
 
 bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidates, double inlier_chi2,
                                       double tear_chi2, double variance_scale, const std::vector<bool>& test_alone,
-                                      std::vector<GlobalLoop>* out) const {
+                                      std::vector<GlobalLoop>* out, std::chrono::steady_clock::time_point deadline,
+                                      bool* timed_out) const {
   const Impl& m = *impl_;
   out->assign(candidates.size(), GlobalLoop());
+  if (timed_out) *timed_out = false;
+  // The budget (Verifier::globalPass): checked after every solve, the largest steps of a pass.
+  auto late = [&]() {
+    if (deadline == std::chrono::steady_clock::time_point::max() || std::chrono::steady_clock::now() < deadline)
+      return false;
+    if (timed_out) *timed_out = true;
+    return true;
+  };
   struct Ends {
     size_t i, match, query;
   };
@@ -111,6 +120,7 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
     }
     bool ok = false;
     cg.solve(4 * kStepIterations, kTolerance, &ok);
+    if (late()) return false;
     if (!ok) {
       all_ok = false;
       continue;
@@ -131,6 +141,7 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
           binary = binary && (w[k] < 1e-6 || w[k] > 1.0 - 1e-6);
         }
         cg.solve(kStepIterations, kTolerance, &ok);
+        if (late()) return false;
         if ((binary && step > 0) || mu > kGncMaxMu) break;
         mu *= kGncFactor;
       }
@@ -163,6 +174,7 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
       without.setWeight(edge[k], 0.0);
       bool solved = false;
       without.solve(2 * kStepIterations, kTolerance, &solved);
+      if (late()) return false;
       if (!solved) continue;
       const Eigen::Vector4d nu = without.residual(edge[k]);  // prediction minus the candidate (yaw wrapped)
       for (size_t i = 0; i < a.size(); ++i) without.setFixed(static_cast<int>(i), false);

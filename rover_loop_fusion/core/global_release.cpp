@@ -11,6 +11,7 @@
 #include "rover_loop_fusion/core/decision.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -59,7 +60,7 @@ bool Verifier::addToGlobalPool(const HeldCandidate& held) {
   return true;
 }
 
-void Verifier::globalPass() {
+Status Verifier::globalPass() {
   const size_t now = graph_.keyframeCount();
   last_global_pass_ = now;
   // Nothing it depends on changed since the last pass (keyframes after the newest anchor do
@@ -68,8 +69,17 @@ void Verifier::globalPass() {
     return now >= h.arrived + static_cast<size_t>(config_.global.global_window);
   };
   const GlobalInputs inputs{graph_.revision(), global_pool_revision_, rule_->driftScale()};
-  if (inputs == last_global_inputs_ && std::none_of(global_pool_.begin(), global_pool_.end(), expired)) return;
+  if (inputs == last_global_inputs_ && std::none_of(global_pool_.begin(), global_pool_.end(), expired))
+    return Status::Ok();
   last_global_inputs_ = inputs;
+  // global_budget_ms, counted from here (the trials' time_budget_ms 0 lifts it: benchmarks).
+  using Clock = std::chrono::steady_clock;
+  using Ms = std::chrono::duration<double, std::milli>;
+  const auto started = Clock::now();
+  const bool bounded = config_.global.global_budget_ms > 0 && config_.trial.time_budget_ms > 0;
+  const auto deadline = bounded ? started + std::chrono::duration_cast<Clock::duration>(Ms(config_.global.global_budget_ms))
+                                : Clock::time_point::max();
+  bool stopped = false;
   const double c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
   const double tear = chiSquareQuantile(config_.global.global_tear_probability, 4);
   const double prior_gate = chiSquareQuantile(config_.global.global_prior_probability, 4);
@@ -91,14 +101,14 @@ void Verifier::globalPass() {
     eligible[i] = prior_d2[i] <= prior_gate;
   }
   std::vector<GlobalLoop> found;
-  graph_.globalConsistency(candidates, c2, tear, rule_->driftScale(), eligible, &found);
+  graph_.globalConsistency(candidates, c2, tear, rule_->driftScale(), eligible, &found, deadline, &stopped);
   auto passes = [&](const GlobalLoop& r, size_t i) {
     return eligible[i] && r.inlier && !r.torn && r.pinned && r.d2 <= c2 &&
            (config_.global.global_max_sigma <= 0 || r.sigma <= config_.global.global_max_sigma);
   };
   std::vector<bool> releasable(global_pool_.size());
   bool any = false;
-  for (size_t i = 0; i < global_pool_.size(); ++i) any = (releasable[i] = passes(found[i], i)) || any;
+  for (size_t i = 0; !stopped && i < global_pool_.size(); ++i) any = (releasable[i] = passes(found[i], i)) || any;
   // Competition: solved again without the releasable ones, a rival of one of them is a pooled
   // candidate of the same revisit (queries within revisit_stretch) that the first solve
   // rejected and that now passes every test. A revisit that two incompatible sets of
@@ -115,7 +125,8 @@ void Verifier::globalPass() {
       rest_index.push_back(i);
     }
     std::vector<GlobalLoop> alt;
-    graph_.globalConsistency(rest, c2, tear, rule_->driftScale(), rest_eligible, &alt);
+    graph_.globalConsistency(rest, c2, tear, rule_->driftScale(), rest_eligible, &alt, deadline, &stopped);
+    if (stopped) std::fill(releasable.begin(), releasable.end(), false);
     const size_t stretch = static_cast<size_t>(std::max(0, config_.revisit.revisit_stretch));
     for (size_t k = 0; k < rest.size(); ++k) {
       const size_t j = rest_index[k];
@@ -140,7 +151,9 @@ void Verifier::globalPass() {
       s.precision(3);
       s << std::fixed << "not released by the global pass within global_window=" << config_.global.global_window
         << " keyframes (last pass: ";
-      if (rival[i] >= 0)
+      if (stopped)
+        s << "stopped after global_budget_ms=" << config_.global.global_budget_ms << " ms, nothing released";
+      else if (rival[i] >= 0)
         s << "ambiguous: without it and the others that pass, the rival loop "
           << global_pool_[rival[i]].candidate.query_index << "->" << global_pool_[rival[i]].candidate.match_index
           << " of the same revisit passes every test instead (global_compete)";
@@ -165,10 +178,20 @@ void Verifier::globalPass() {
   }
   if (waiting.size() != global_pool_.size()) ++global_pool_revision_;
   global_pool_.swap(waiting);
-  if (released.empty()) return;
+  if (stopped) {
+    last_global_inputs_ = GlobalInputs();  // nothing was decided: the next pass runs again
+    std::ostringstream s;
+    s.precision(1);
+    s << std::fixed << "the global pass over " << candidates.size() << " pooled candidates stopped after "
+      << Ms(Clock::now() - started).count() << " ms (global_budget_ms=" << config_.global.global_budget_ms
+      << "): nothing released; the pool waits for the next pass";
+    return Status::Warning(s.str());
+  }
+  if (released.empty()) return Status::Ok();
   std::sort(released.begin(), released.end(),
             [](const HeldCandidate& a, const HeldCandidate& b) { return a.query_pos < b.query_pos; });
   release(released);
+  return Status::Ok();
 }
 
 }  // namespace core

@@ -284,6 +284,9 @@ std::vector<Parameter> makeTable() {
   t.push_back(number("global_max_sigma", "m", FIELD(global.global_max_sigma), 0.0, 1000.0, false,
                      "an inlier is released only if the other loops pin its relative position down to this std; "
                      "0: no bound"));
+  t.push_back(number("global_budget_ms", "ms", FIELD(global.global_budget_ms), 0.0, 1e6, false,
+                     "a global pass that runs longer stops and releases nothing (the pool waits for the next); "
+                     "0, or time_budget_ms 0: no bound"));
   t.push_back(boolean("global_compete", FIELD(global.global_compete),
                       "before a release, solve again without it: if a rival candidate of the same revisit "
                       "then passes every test, the revisit is ambiguous and neither is released"));

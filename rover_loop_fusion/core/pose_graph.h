@@ -19,6 +19,7 @@
 
 #include <Eigen/Core>
 
+#include <chrono>
 #include <limits>
 #include <memory>
 #include <string>
@@ -232,10 +233,13 @@ class KeyframeGraph {
   /// (leave one out; only those marked in `test_alone`, if it is not empty: one solve each).
   /// One GlobalLoop per candidate, in order. Changes nothing. False if a
   /// component's condensed graph could not be built or solved (its candidates stay without a
-  /// result: chi2 NaN).
+  /// result: chi2 NaN), or if `deadline` passed (checked after every solve; *timed_out set, the
+  /// results incomplete: not to be acted on).
   bool globalConsistency(const std::vector<LoopCandidate>& candidates, double inlier_chi2, double tear_chi2,
                          double variance_scale, const std::vector<bool>& test_alone,
-                         std::vector<GlobalLoop>* out) const;
+                         std::vector<GlobalLoop>* out,
+                         std::chrono::steady_clock::time_point deadline = std::chrono::steady_clock::time_point::max(),
+                         bool* timed_out = nullptr) const;
   /// X of every keyframe, and X := such a copy again (a revocation that did not go through puts
   /// the estimate back; false, X unchanged, if the keyframe count differs).
   std::vector<KeyframeState> estimates() const;

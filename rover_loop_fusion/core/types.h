@@ -458,6 +458,11 @@ struct GlobalConfig {
   /// released (two incompatible sets of loops explain it: a row of look-alikes beside the true
   /// one). false: release what the first solve finds.
   bool global_compete = true;
+  /// A pass that runs longer than this [ms] stops and releases nothing; its pool waits for the
+  /// next pass (and a candidate at most global_window keyframes). The pass runs in the
+  /// keyframe's arrival (addKeyframe), on loop_fusion's thread: this bounds what it can cost one
+  /// keyframe. 0, or time_budget_ms 0 (verdicts independent of the machine's load): no bound.
+  double global_budget_ms = 200.0;
 };
 
 /// The verifier's parameters, nested by concern. Every field is named by its key (YAML, ROS

@@ -69,8 +69,10 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
                         [this](const HeldCandidate& h, const std::string& why) { dropMember(h, why, false); });
   }
   if (!global_pool_.empty() &&
-      graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period))
-    globalPass();
+      graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period)) {
+    const Status pass = globalPass();
+    if (s.ok && !s.warning() && pass.warning()) return pass;
+  }
   return s;
 }
 

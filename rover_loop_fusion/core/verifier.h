@@ -167,8 +167,9 @@ class Verifier {
   /// (then it is rejected or dropped).
   bool addToGlobalPool(const HeldCandidate& h);
   /// global_check: the global pass over the pool (every global_period keyframes): releases the
-  /// inliers the other loops pin down, drops what waited longer than global_window.
-  void globalPass();
+  /// inliers the other loops pin down, drops what waited longer than global_window. A warning
+  /// if it stopped at global_budget_ms (nothing released; the next pass tries again).
+  Status globalPass();
   /// Releases groups that are confirmed, drops those that expired (decisions_); the revisit
   /// hypotheses too if `revisit` (on keyframe arrival only: their joint trials).
   void settle(bool revisit);
@@ -221,6 +222,8 @@ class Verifier {
     }
   };
   GlobalInputs last_global_inputs_;
+  /// The budget stopped the last pass (said in the drops it leads to).
+  bool global_stopped_ = false;
   std::vector<LoopDecision> decisions_;    ///< not yet taken
   std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
 };

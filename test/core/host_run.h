@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <functional>
 #include <set>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -27,6 +28,7 @@ struct HostRun {
   size_t held_at_end = 0;  ///< deferred and not decided when the keyframes ran out
   std::vector<core::LoopDecision> decisions;
   std::vector<core::Verdict> verdicts;  ///< verify()'s, in order
+  std::vector<std::string> warnings;    ///< addKeyframe()'s warnings, in order
   double ate = 0.0;                     ///< of the verifier's trajectory against the truth
 };
 
@@ -60,7 +62,9 @@ inline HostRun runAsHost(const core::VerifierConfig& cfg, const sim::Scene& s,
   };
   size_t next = 0;
   for (const sim::SimKeyframe& kf : s.keyframes) {
-    EXPECT_TRUE(v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q).ok);
+    const core::Status added = v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q);
+    EXPECT_TRUE(added.ok) << added.message;
+    if (added.warning()) r.warnings.push_back(added.message);
     collect();
     for (; next < candidates.size() && candidates[next].query_index == kf.index; ++next) {
       const core::LoopCandidate& c = candidates[next];

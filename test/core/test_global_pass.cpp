@@ -135,6 +135,40 @@ TEST(GlobalPass, ThePoolIsBoundedAndWaitsAtMostGlobalWindow) {
   EXPECT_EQ(r.dropped + static_cast<int>(r.held_at_end), r.deferred);
 }
 
+TEST(GlobalPass, APassOverGlobalBudgetMsReleasesNothingAndSaysSo) {
+  // A pass runs on keyframe arrival (loop_fusion's thread); global_budget_ms bounds it. A budget
+  // no pass can meet: nothing is released, the keyframes that ran a pass warn, and a candidate
+  // that waited out global_window says why. The same run with a budget every pass meets
+  // releases: the budget, nothing else, stopped it.
+  const sim::Scene s = sparseRevisits();
+  core::VerifierConfig bounded = config(true);
+  bounded.trial.time_budget_ms = 60000;            // budgets on, no trial anywhere near its own
+  bounded.revisit.revisit_retest_budget_ms = 0.0;  // the re-tests as in the runs without budgets
+  bounded.global.global_window = 60;
+  bounded.global.global_budget_ms = 1e-6;
+  const Outcome stopped = run(bounded, s);
+  const Outcome off = run(config(false), s);
+  core::VerifierConfig generous = bounded;
+  generous.global.global_budget_ms = 1e6;
+  const Outcome passed = run(generous, s);
+
+  EXPECT_EQ(stopped.true_accepted, off.true_accepted);
+  EXPECT_EQ(stopped.false_accepted, off.false_accepted);
+  for (const LoopDecision& d : stopped.decisions)
+    EXPECT_FALSE(d.kind == LoopDecision::Kind::kRelease && d.verdict.detail.find("global pass") != std::string::npos)
+        << d.verdict.detail;
+  ASSERT_FALSE(stopped.warnings.empty()) << "a keyframe whose pass was stopped warns the host";
+  for (const std::string& w : stopped.warnings) EXPECT_NE(w.find("global_budget_ms"), std::string::npos) << w;
+  bool said = false;
+  for (const LoopDecision& d : stopped.decisions)
+    said = said || d.verdict.detail.find("stopped after global_budget_ms") != std::string::npos;
+  EXPECT_TRUE(said) << "a candidate that waited out global_window says the budget stopped the last pass";
+
+  EXPECT_TRUE(passed.warnings.empty()) << passed.warnings.front();
+  EXPECT_GT(passed.true_accepted, off.true_accepted) << "the same passes within their budget release";
+  EXPECT_EQ(passed.false_accepted, 0);
+}
+
 TEST(GlobalPass, OffByDefaultAndOnlyUnderDecisionRevisit) {
   EXPECT_FALSE(core::VerifierConfig().global.global_check);
   const sim::Scene s = sparseRevisits();

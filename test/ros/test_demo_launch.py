@@ -91,6 +91,10 @@ class DemoLaunch(unittest.TestCase):
         self.assertIs(params["/b/rover/global_check"], False)
         params, _ = load("verifier.launch", "global_check:=true")
         self.assertIs(params["/rover_verifier/rover/global_check"], True)
+        # ...and its budget per pass: the YAML's 200 ms unless the arg overrides it.
+        self.assertEqual(params["/rover_verifier/rover/global_budget_ms"], 200.0)
+        params, _ = load("verifier.launch", "global_budget_ms:=50")
+        self.assertEqual(params["/rover_verifier/rover/global_budget_ms"], 50.0)
 
 
 if __name__ == "__main__":
