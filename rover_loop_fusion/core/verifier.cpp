@@ -71,7 +71,7 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
   if (!global_pool_.empty() &&
       graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period)) {
     const Status pass = globalPass();
-    if (s.ok && !s.warning() && pass.warning()) return pass;
+    if (s.ok && pass.warning()) return Status::Warning(s.warning() ? s.message + "; " + pass.message : pass.message);
   }
   return s;
 }

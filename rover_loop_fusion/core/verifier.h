@@ -222,8 +222,6 @@ class Verifier {
     }
   };
   GlobalInputs last_global_inputs_;
-  /// The budget stopped the last pass (said in the drops it leads to).
-  bool global_stopped_ = false;
   std::vector<LoopDecision> decisions_;    ///< not yet taken
   std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
 };
