@@ -13,12 +13,6 @@ namespace core {
 
 using condensed_detail::orderedColumns;
 
-namespace {
-/// wrapAngle without its sine, cosine and arctangent for an angle already in [-pi, pi] (nearly
-/// every yaw residual and update of a solve; wrapAngle would return it to within a rounding).
-double wrapNear(double a) { return a >= -M_PI && a <= M_PI ? a : wrapAngle(a); }
-}  // namespace
-
 int CondensedGraph::addAnchor(const AnchorState& state, double pitch, double roll, bool fixed) {
   states_.push_back(state);
   pitch_roll_trig_.emplace_back(std::cos(pitch), std::sin(pitch), std::cos(roll), std::sin(roll));
@@ -84,7 +78,7 @@ Eigen::Vector4d CondensedGraph::residual(size_t e, const Eigen::Matrix3d& Ra) co
   const AnchorState& b = states_[ed.to];
   Eigen::Vector4d r;
   r.head<3>() = Ra.transpose() * (b.p - a.p) - ed.t;
-  r[3] = wrapNear(b.yaw - a.yaw - ed.yaw);
+  r[3] = wrapAngleNear(b.yaw - a.yaw - ed.yaw);
   return r;
 }
 
@@ -125,7 +119,7 @@ int CondensedGraph::solve(int max_iterations, double tolerance, bool* ok, bool* 
       [this](size_t e) { return linearise(e); },
       [this](size_t i, const Eigen::Ref<const Eigen::Vector4d>& dx) {
         states_[i].p += dx.head<3>();
-        states_[i].yaw = wrapNear(states_[i].yaw + dx[3]);
+        states_[i].yaw = wrapAngleNear(states_[i].yaw + dx[3]);
       });
 }
 

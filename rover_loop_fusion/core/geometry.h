@@ -16,6 +16,11 @@ namespace core {
 /// An angle wrapped to (-pi, pi], any number of turns.
 inline double wrapAngle(double a) { return std::atan2(std::sin(a), std::cos(a)); }
 
+/// wrapAngle for an angle that is nearly always in [-pi, pi] already (a condensed solve's yaw
+/// residuals and updates): returned as it is then, without sine, cosine and arctangent
+/// (wrapAngle would give it back to within a rounding); wrapAngle otherwise.
+inline double wrapAngleNear(double a) { return a >= -M_PI && a <= M_PI ? a : wrapAngle(a); }
+
 /// Wraps an angle difference to [-pi, pi] by one turn (the differences here are small).
 /// A template so that Ceres' autodiff (Jet) can use it.
 template <typename T>

@@ -76,9 +76,9 @@ Status Verifier::globalPass() {
   using Clock = std::chrono::steady_clock;
   using Ms = std::chrono::duration<double, std::milli>;
   const auto started = Clock::now();
-  const bool bounded = config_.global.global_budget_ms > 0 && config_.trial.time_budget_ms > 0;
-  const auto deadline = bounded ? started + std::chrono::duration_cast<Clock::duration>(Ms(config_.global.global_budget_ms))
-                                : Clock::time_point::max();
+  const double budget = arrivalBudgetMs(config_.global.global_budget_ms);
+  const auto deadline = budget > 0 ? started + std::chrono::duration_cast<Clock::duration>(Ms(budget))
+                                   : Clock::time_point::max();
   bool stopped = false;
   const double c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
   const double tear = chiSquareQuantile(config_.global.global_tear_probability, 4);

@@ -296,7 +296,7 @@ bool Verifier::retestNow() const {
   // within revisit_retest_budget_ms; the first re-test of a keyframe always runs (each is bounded
   // by time_budget_ms itself), so every waiting member is tested in turn however busy the
   // keyframes are.
-  const double budget = config_.trial.time_budget_ms > 0 ? config_.revisit.revisit_retest_budget_ms : 0.0;
+  const double budget = arrivalBudgetMs(config_.revisit.revisit_retest_budget_ms);
   return retest_.count == 0 || budget <= 0 || msSince(retest_.started) < budget;
 }
 

@@ -182,6 +182,10 @@ class Verifier {
   /// keyframe): while revisit_retest_budget_ms, counted from the keyframe's arrival, is not
   /// spent (at least one re-test per keyframe). Revisit members are dropped on keyframe arrival only.
   bool retestNow() const;
+  /// A keyframe's budget for work on its arrival (revisit_retest_budget_ms, global_budget_ms):
+  /// `ms`, or 0 (no bound) when time_budget_ms 0 lifts every budget (verdicts independent of the
+  /// machine's load: the benchmarks).
+  double arrivalBudgetMs(double ms) const { return config_.trial.time_budget_ms > 0 ? ms : 0.0; }
   /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
   void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
