@@ -18,7 +18,7 @@ own libraries (LD_LIBRARY_PATH=DIR/lib), on the same rows (default: --modes 4dof
              ratio of the new build's summed verify_ms to the old one's over all rounds
 Writes runs/ (each run's verdicts and output), rows.csv and summary.md to --out. Run it on an
 otherwise idle machine: the numbers are wall-clock times; the ratio is the result. Options that
-read a file (--config YAML) must suit both builds: an older build refuses a key it does not know.
+read a file (--config YAML) must suit both builds: an older build refuses a key it does not know."""
 import argparse
 import csv
 import glob
