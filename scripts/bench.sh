@@ -12,6 +12,8 @@
 #                                             compared, summed verify_ms side by side (scripts/bench/cost_ab.py)
 #   ./scripts/bench.sh robustness [--split test|tuning] [--set K=V]  the +-10 % threshold and gate
 #                                             settings per case, recall spread (scripts/bench/robustness.py)
+#   ./scripts/bench.sh targets [--poc DIR ...]  issue 19's targets per case from the runs above, beside
+#                                             the peers, with the causes of each miss (scripts/bench/targets.py)
 #   ./scripts/bench.sh sweep ...              scripts/threshold_sweep.py (tuning cases only)
 #   ./scripts/bench.sh evaluate ...           scripts/evaluate.py (verdict log + labels -> AP, MR, ...)
 #   ./scripts/bench.sh diagnostics DIR        scripts/verdict_diagnostics.py (why decisions went wrong)
@@ -21,8 +23,8 @@
 set -euo pipefail
 family="${1:-}"
 case "$family" in
-  poc|real|posegraph|cost|cost_ab|long_replay|fault_replay|agreement|identity|robustness|all|sweep|evaluate|diagnostics) shift ;;
-  *) echo "usage: $0 poc|real|posegraph|cost|cost_ab|long_replay|fault_replay|agreement|identity|robustness|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
+  poc|real|posegraph|cost|cost_ab|long_replay|fault_replay|agreement|identity|robustness|targets|all|sweep|evaluate|diagnostics) shift ;;
+  *) echo "usage: $0 poc|real|posegraph|cost|cost_ab|long_replay|fault_replay|agreement|identity|robustness|targets|all|sweep|evaluate|diagnostics [options]" >&2; exit 2 ;;
 esac
 source "$(dirname "${BASH_SOURCE[0]}")/setup.sh"
 source "$ROVER_ROOT/scripts/venv.sh"
