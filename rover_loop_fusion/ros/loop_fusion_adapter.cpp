@@ -105,6 +105,9 @@ struct LoopFusionAdapter::Impl {
   ros::Publisher candidate_pub;  // ~loop_candidates: every candidate, before it is verified
   std::unordered_map<int64_t, KeyframeInfo> keyframes;
   RepeatedWarning refused_keyframes;
+  /// What the verifier says of a keyframe it took (a stopped clock, a VIO relocation, a global
+  /// pass stopped at global_budget_ms): as the standalone node logs it.
+  RepeatedWarning keyframe_warnings;
   size_t verdicts = 0;
   /// Held candidates: what findConnection found, to hand back to loop_fusion on a release.
   struct Held {
@@ -330,6 +333,8 @@ void LoopFusionAdapter::addKeyframe(int index, double stamp, int sequence, const
     if (!s.ok)
       m.refused_keyframes.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + s.message +
                                "); loops that involve it are rejected");
+    else if (s.warning())
+      m.keyframe_warnings.warn("verifier, keyframe " + std::to_string(index) + ": " + s.message);
     m.collectDecisions();
   });
 }

@@ -1550,6 +1550,25 @@ TEST_F(Adapter, EveryCommittedLoopGetsItsVerdictWhateverTheStamps) {
   EXPECT_EQ(listen.verdicts_[0].query_stamp, ros::TIME_MAX);
 }
 
+TEST_F(Adapter, WhatTheVerifierSaysOfAKeyframeItTookIsLoggedInsideLoopFusion) {
+  // A keyframe the verifier takes with a warning (here a stalled driver: the clock stops while
+  // the pose moves on; elsewhere a VIO relocation, a global pass stopped at its budget) is
+  // logged as the standalone node logs it, not kept silent inside loop_fusion.
+  LogCapture log;
+  ASSERT_TRUE(log.connect());
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  for (int i = 0; i < 4; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = 100.0 + std::min(i, 1);  // 100, 101, 101, 101
+    kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0.0, 0.0);
+    pg.addKeyFrame(kf, nullptr);
+  }
+  const std::string line = log.waitFor(rosgraph_msgs::Log::WARN, {"verifier, keyframe 2:", "clock stopped"});
+  EXPECT_FALSE(line.empty());
+  EXPECT_EQ(log.count(rosgraph_msgs::Log::WARN, "clock stopped"), 1u);  // the verifier says it once
+}
+
 TEST_F(Adapter, AStalledVerdictLogReaderNeverHoldsUpVerification) {
   // The CSV log is written on its own thread: with a FIFO whose reader does not read, the
   // pipe fills after a few hundred rows, and verifyLoop must still return for every loop.
