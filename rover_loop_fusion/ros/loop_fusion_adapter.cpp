@@ -273,25 +273,35 @@ void LoopFusionAdapter::finish() {
     m.mode = Impl::Mode::kFinished;
     // After ros::shutdown() (loop_fusion's 's' command, Ctrl-C) rosconsole prints nothing: say
     // it on stderr then, as the abort that follows flushes nothing.
-    auto tell = [](bool error, const std::string& text) {
+    enum class Level { kInfo, kWarn, kError };
+    auto tell = [](Level level, const std::string& text) {
       if (ros::ok()) {
-        if (error)
+        if (level == Level::kError)
           ROS_ERROR("%s", text.c_str());
+        else if (level == Level::kWarn)
+          ROS_WARN("%s", text.c_str());
         else
           ROS_INFO("%s", text.c_str());
         return;
       }
       std::fflush(stdout);  // what loop_fusion printed before comes first
-      std::fprintf(stderr, "[%s] %s\n", error ? "ERROR" : " INFO", text.c_str());
+      std::fprintf(stderr, "[%s] %s\n", level == Level::kError ? "ERROR" : level == Level::kWarn ? " WARN" : " INFO",
+                   text.c_str());
       std::fflush(stderr);
     };
+    // What the rate-limited warnings held back since their last summary.
+    for (RepeatedWarning* w : {&m.refused_keyframes, &m.keyframe_warnings}) {
+      const std::string summary = w->takeSummary();
+      if (!summary.empty()) tell(Level::kWarn, summary);
+    }
     if (held > 0)
-      tell(false, "[rover] loop_fusion ends: " + std::to_string(held) +
+      tell(Level::kInfo, "[rover] loop_fusion ends: " + std::to_string(held) +
                       " candidates still held got their final verdict (unconfirmed, drop)");
     // loop_fusion ends by std::terminate: the writer thread must have the rows before abort().
     const size_t unwritten = m.host->flushLog(2.0);
     if (unwritten > 0)
-      tell(true, "[rover] loop_fusion ends: " + std::to_string(unwritten) + " verdict rows not written to the log yet");
+      tell(Level::kError,
+           "[rover] loop_fusion ends: " + std::to_string(unwritten) + " verdict rows not written to the log yet");
   });
 }
 
@@ -334,7 +344,7 @@ void LoopFusionAdapter::addKeyframe(int index, double stamp, int sequence, const
       m.refused_keyframes.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + s.message +
                                "); loops that involve it are rejected");
     else if (s.warning())
-      m.keyframe_warnings.warn("verifier, keyframe " + std::to_string(index) + ": " + s.message);
+      m.keyframe_warnings.warn(keyframeWarning(index, s.message));
     m.collectDecisions();
   });
 }

@@ -116,6 +116,11 @@ std::string str(T value) {
 
 // ---- RepeatedWarning -------------------------------------------------------------------------
 
+std::string keyframeWarning(int64_t index, const std::string& message) {
+  const std::string named = "keyframe " + std::to_string(static_cast<long long>(index)) + ":";
+  return "verifier, " + (message.compare(0, named.size(), named) == 0 ? message : named + " " + message);
+}
+
 void RepeatedWarning::warn(const std::string& text) {
   ++count_;
   if (count_ <= individually_) {
@@ -130,10 +135,17 @@ void RepeatedWarning::warn(const std::string& text) {
 }
 
 void RepeatedWarning::flush() {
-  if (held_back_ == 0) return;
-  ROS_WARN("[rover] %zu more like this (%zu in all); the latest: %s", held_back_, count_, latest_.c_str());
+  const std::string summary = takeSummary();
+  if (!summary.empty()) ROS_WARN("%s", summary.c_str());
+}
+
+std::string RepeatedWarning::takeSummary() {
+  if (held_back_ == 0) return std::string();
+  const std::string out = "[rover] " + std::to_string(held_back_) + " more like this (" + std::to_string(count_) +
+                          " in all); the latest: " + latest_;
   held_back_ = 0;
   last_summary_ = ros::WallTime::now();
+  return out;
 }
 
 // ---- HostParamReader -------------------------------------------------------------------------

@@ -46,6 +46,10 @@ std::string resolveVerifierType(const std::string& type_or_alias);
 /// accept_without_prior and confirm_without_prior (from ~relocalisation).
 const std::vector<std::string>& hostDerivedVerifierParameters();
 
+/// What a host logs of a warning the verifier's addKeyframe returned for keyframe `index`:
+/// "verifier, keyframe N: <message>", the keyframe named once (the graph's own warnings name it).
+std::string keyframeWarning(int64_t index, const std::string& message);
+
 /// An invalid_input rejection of c that says why.
 core::Verdict rejection(const core::LoopCandidate& c, const std::string& detail);
 
@@ -84,6 +88,9 @@ class RepeatedWarning {
   void warn(const std::string& text);
   /// Logs the summary of what was held back since the last one.
   void flush();
+  /// That summary, for a host that must print it elsewhere (after ros::shutdown() rosconsole
+  /// prints nothing); "" if nothing was held back.
+  std::string takeSummary();
   size_t count() const { return count_; }
 
  private:

@@ -363,7 +363,7 @@ void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg, int64_t index) {
     have_keyframe_ = true;
     changed_ = true;
     if (added.warning() && added.message != s.message)
-      ROS_WARN("[rover] verifier, keyframe %ld: %s", static_cast<long>(index), added.message.c_str());
+      ROS_WARN("[rover] %s", keyframeWarning(index, added.message).c_str());
     if (!added.ok)
       refused_warning_.warn("keyframe " + std::to_string(index) + " not added to the verifier (" + added.message +
                             "); loops that involve it are rejected");

@@ -1569,6 +1569,24 @@ TEST_F(Adapter, WhatTheVerifierSaysOfAKeyframeItTookIsLoggedInsideLoopFusion) {
   EXPECT_EQ(log.count(rosgraph_msgs::Log::WARN, "clock stopped"), 1u);  // the verifier says it once
 }
 
+TEST_F(Adapter, WarningsTheRateLimitHeldBackAreSummarisedWhenLoopFusionEnds) {
+  // 25 keyframes the verifier refuses (a NaN position): 20 warnings one by one, then the rest
+  // wait for a summary, which finish() (loop_fusion ending) must not lose.
+  LogCapture log;
+  ASSERT_TRUE(log.connect());
+  FakePoseGraph pg;
+  ASSERT_TRUE(pg.setIMUFlag(true));
+  for (int i = 0; i < 25; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = 100.0 + i;
+    kf.vio_T_w_i = Eigen::Vector3d(std::nan(""), 0.0, 0.0);
+    pg.addKeyFrame(kf, nullptr);
+  }
+  EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::WARN, {"keyframe 19 not added", "further ones are summarised"}).empty());
+  pg.rover.finish();
+  EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::WARN, {"5 more like this (25 in all)", "keyframe 24 not added"}).empty());
+}
+
 TEST_F(Adapter, AStalledVerdictLogReaderNeverHoldsUpVerification) {
   // The CSV log is written on its own thread: with a FIFO whose reader does not read, the
   // pipe fills after a few hundred rows, and verifyLoop must still return for every loop.
