@@ -152,7 +152,8 @@ Status Verifier::globalPass() {
       s << std::fixed << "not released by the global pass within global_window=" << config_.global.global_window
         << " keyframes (last pass: ";
       if (stopped)
-        s << "stopped after global_budget_ms=" << config_.global.global_budget_ms << " ms, nothing released";
+        s << "stopped after global_budget_ms=" << std::defaultfloat << config_.global.global_budget_ms << std::fixed
+          << " ms, nothing released";
       else if (rival[i] >= 0)
         s << "ambiguous: without it and the others that pass, the rival loop "
           << global_pool_[rival[i]].candidate.query_index << "->" << global_pool_[rival[i]].candidate.match_index
@@ -183,8 +184,8 @@ Status Verifier::globalPass() {
     std::ostringstream s;
     s.precision(1);
     s << std::fixed << "the global pass over " << candidates.size() << " pooled candidates stopped after "
-      << Ms(Clock::now() - started).count() << " ms (global_budget_ms=" << config_.global.global_budget_ms
-      << "): nothing released; the pool waits for the next pass";
+      << Ms(Clock::now() - started).count() << " ms (global_budget_ms=" << std::defaultfloat
+      << config_.global.global_budget_ms << "): nothing released; the pool waits for the next pass";
     return Status::Warning(s.str());
   }
   if (released.empty()) return Status::Ok();
