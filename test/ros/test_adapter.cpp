@@ -1550,6 +1550,19 @@ TEST_F(Adapter, EveryCommittedLoopGetsItsVerdictWhateverTheStamps) {
   EXPECT_EQ(listen.verdicts_[0].query_stamp, ros::TIME_MAX);
 }
 
+namespace {
+/// `n` keyframes without loops, stamped `stamp(i)`, at VIO position `position(i)`.
+void addKeyframes(FakePoseGraph* pg, int n, const std::function<double(int)>& stamp,
+                  const std::function<Eigen::Vector3d(int)>& position) {
+  for (int i = 0; i < n; ++i) {
+    FakeKeyFrame kf;
+    kf.time_stamp = stamp(i);
+    kf.vio_T_w_i = position(i);
+    pg->addKeyFrame(kf, nullptr);
+  }
+}
+}  // namespace
+
 TEST_F(Adapter, WhatTheVerifierSaysOfAKeyframeItTookIsLoggedInsideLoopFusion) {
   // A keyframe the verifier takes with a warning (here a stalled driver: the clock stops while
   // the pose moves on; elsewhere a VIO relocation, a global pass stopped at its budget) is
@@ -1558,12 +1571,8 @@ TEST_F(Adapter, WhatTheVerifierSaysOfAKeyframeItTookIsLoggedInsideLoopFusion) {
   ASSERT_TRUE(log.connect());
   FakePoseGraph pg;
   ASSERT_TRUE(pg.setIMUFlag(true));
-  for (int i = 0; i < 4; ++i) {
-    FakeKeyFrame kf;
-    kf.time_stamp = 100.0 + std::min(i, 1);  // 100, 101, 101, 101
-    kf.vio_T_w_i = Eigen::Vector3d(0.5 * i, 0.0, 0.0);
-    pg.addKeyFrame(kf, nullptr);
-  }
+  addKeyframes(&pg, 4, [](int i) { return 100.0 + std::min(i, 1); },  // 100, 101, 101, 101
+               [](int i) { return Eigen::Vector3d(0.5 * i, 0.0, 0.0); });
   const std::string line = log.waitFor(rosgraph_msgs::Log::WARN, {"verifier, keyframe 2:", "clock stopped"});
   EXPECT_FALSE(line.empty());
   EXPECT_EQ(log.count(rosgraph_msgs::Log::WARN, "clock stopped"), 1u);  // the verifier says it once
@@ -1576,12 +1585,7 @@ TEST_F(Adapter, WarningsTheRateLimitHeldBackAreSummarisedWhenLoopFusionEnds) {
   ASSERT_TRUE(log.connect());
   FakePoseGraph pg;
   ASSERT_TRUE(pg.setIMUFlag(true));
-  for (int i = 0; i < 25; ++i) {
-    FakeKeyFrame kf;
-    kf.time_stamp = 100.0 + i;
-    kf.vio_T_w_i = Eigen::Vector3d(std::nan(""), 0.0, 0.0);
-    pg.addKeyFrame(kf, nullptr);
-  }
+  addKeyframes(&pg, 25, [](int i) { return 100.0 + i; }, [](int) { return Eigen::Vector3d(std::nan(""), 0.0, 0.0); });
   EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::WARN, {"keyframe 19 not added", "further ones are summarised"}).empty());
   pg.rover.finish();
   EXPECT_FALSE(log.waitFor(rosgraph_msgs::Log::WARN, {"5 more like this (25 in all)", "keyframe 24 not added"}).empty());
