@@ -95,7 +95,7 @@ def setting_flags(flags, setting):
 def counts(verdicts_path, labels_path):
     """TP/FP/TN/FN of a run's final verdicts against the scenario's labels (metrics.join: the
     candidates of one (query, match) pair take their labels in order; label -1 left out)."""
-    rows = [r for r in metrics.read_verdicts(verdicts_path) if r.get("final", "1") == "1"]
+    rows = metrics.read_final_verdicts(verdicts_path)
     j = metrics.join(rows, metrics.read_labels(labels_path))
     true, accepted = j["label"] == 1, j["accepted"]
     return {"tp": int((true & accepted).sum()), "fp": int((~true & accepted).sum()),

@@ -44,7 +44,7 @@ import re
 import sys
 
 sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # roverlib
-from roverlib import bench, metrics  # noqa: E402
+from roverlib import bench, methods, metrics  # noqa: E402
 
 FAMILIES = ("poc", "real", "posegraph")
 ROVER = "rover+lf"
@@ -80,10 +80,6 @@ def classify(row, table):
         if re.search(pattern, text):
             return cause
     return f"{row['reason']} ({row.get('decision', '')})"
-
-
-def final_rows(run_dir):
-    return [r for r in metrics.read_verdicts(os.path.join(run_dir, "verdicts.csv")) if r.get("final", "1") == "1"]
 
 
 def release_delays(rows):
@@ -133,12 +129,13 @@ def pr(tp, fp, fn):
 
 
 def read_family(folder):
-    """{case: {method: row}} of a family folder's summary.csv."""
-    out = collections.defaultdict(dict)
+    """The rows of a family folder's summary.csv, and them as {case: {method: row}}."""
     with open(os.path.join(folder, "summary.csv")) as f:
-        for r in csv.DictReader(f):
-            out[r["case"]][r["method"]] = r
-    return out
+        summary = list(csv.DictReader(f))
+    per_case = collections.defaultdict(dict)
+    for r in summary:
+        per_case[r["case"]][r["method"]] = r
+    return summary, per_case
 
 
 def read_spread(folder):
@@ -191,7 +188,7 @@ def judge_case(family, case, methods, spread, folder):
     labels = os.path.join(folder, "scenarios", case, "candidates.csv")
     row["delays"], row["keyframe_ms"] = [], keyframe_ms(run)
     if os.path.exists(os.path.join(run, "verdicts.csv")) and os.path.exists(labels):
-        rows = final_rows(run)
+        rows = metrics.read_final_verdicts(os.path.join(run, "verdicts.csv"))
         lost, admitted = causes(rows, labels)
         row["lost_by"], row["admitted_by"] = counted(lost), counted(admitted)
         row["delays"] = release_delays(rows)
@@ -202,16 +199,16 @@ def judge_case(family, case, methods, spread, folder):
     return row
 
 
-def judge_family(family, rows, per_case):
-    """Pooled counts of ROVER and every peer; the two family targets."""
+def judge_family(family, rows, summary):
+    """Pooled counts of ROVER and every peer (methods.pooled); the two family targets."""
     out = {"family": family, "cases": len(rows)}
-    for m in (ROVER,) + PEERS:
-        sums = [sum(int(per_case[c][m][k]) for c in per_case if m in per_case[c]) for k in ("tp", "fp", "fn")]
-        p, r = pr(*sums)
-        key = "rover" if m == ROVER else m
-        out[f"{key}_counts"] = "/".join(map(str, sums))
-        out[f"{key}_precision"], out[f"{key}_recall"] = p, r
-    best = max((out[f"{m}_recall"] for m in PEERS if out[f"{m}_recall"] == out[f"{m}_recall"]), default=float("nan"))
+    for p in methods.pooled(summary):
+        if p["method"] in (ROVER,) + PEERS:
+            key = "rover" if p["method"] == ROVER else p["method"]
+            out[f"{key}_counts"] = f"{p['tp']}/{p['fp']}/{p['fn']}"
+            out[f"{key}_precision"], out[f"{key}_recall"] = p["precision"], p["recall"]
+    recalls = [out[f"{m}_recall"] for m in PEERS if f"{m}_recall" in out]
+    best = max((r for r in recalls if r == r), default=float("nan"))
     out["best_peer_recall"] = best
     out["precision_target"] = "met" if out["rover_precision"] >= P_FAMILY else "MISSED"
     out["recall_target"] = "met" if out["rover_recall"] >= best - R_MARGIN else "MISSED"
@@ -274,13 +271,13 @@ def main(argv=None):
             notes.append(f"{fam}: left out ({folder}/summary.csv not found; run ./scripts/bench.sh {fam})")
             continue
         notes.append(f"{fam}: {folder}")
-        per_case = read_family(folder)
+        summary, per_case = read_family(folder)
         missing = [c for c in per_case if ROVER not in per_case[c]]
         if missing:
             sys.exit(f"{folder}/summary.csv: no {ROVER} row for {', '.join(missing)}")
         rows = [judge_case(fam, c, per_case[c], spread, folder) for c in sorted(per_case)]
         cases += rows
-        families.append(judge_family(fam, rows, per_case))
+        families.append(judge_family(fam, rows, summary))
     if not families:
         sys.exit("no family benchmark folder found: run ./scripts/bench.sh poc|real|posegraph first")
     os.makedirs(a.out, exist_ok=True)

@@ -38,6 +38,12 @@ def read_verdicts(path):
     return rows
 
 
+def read_final_verdicts(path):
+    """The final verdict of each candidate of a verdict CSV (rows with final=0 are a held
+    candidate's deferral; a log without the column has final verdicts only)."""
+    return [r for r in read_verdicts(path) if r.get("final", "1") == "1"]
+
+
 def read_labels(path):
     """{(query_index, match_index): [label, ...]} from a scenario's candidates.csv or any CSV
     with the columns query_index, match_index, label (1 true, 0 false, -1 unknown)."""
