@@ -468,10 +468,11 @@ struct GlobalConfig {
 /// The verifier's parameters, nested by concern. Every field is named by its key (YAML, ROS
 /// parameter, rover_replay flag); core/parameters.h is the one source of each key's text.
 struct VerifierConfig {
-  /// How candidates are decided: kMetric (`metric`: threshold and innovation gate in metres),
-  /// kChi2 (`drift`, `chi2`: in units of drift) or kRevisit (the metric test as the fast path,
-  /// `revisit` for what it rejects). See Decision.
-  Decision decision = Decision::kRevisit;
+  /// How candidates are decided: kMetric (`metric`, the default: threshold and innovation gate
+  /// in metres), kChi2 (`drift`, `chi2`: in units of drift) or kRevisit (the metric test as the
+  /// fast path, `revisit` for what it rejects; opt-in: it releases rows of look-alikes). See
+  /// Decision.
+  Decision decision = Decision::kMetric;
   Mode mode = Mode::kFourDof;
   Alignment alignment = Alignment::kSE3;
   MetricConfig metric;
