@@ -23,10 +23,10 @@ import sys
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+from roverlib import bag, geometry as g, programs, scenario, scenes
 
-import simulate  # noqa: E402
-from roverlib import bag, geometry as g, scenario, scenes  # noqa: E402
+HERE = os.path.dirname(os.path.abspath(__file__))
+simulate = programs.load("simulate.py")
 
 ROOT = os.path.dirname(HERE)
 

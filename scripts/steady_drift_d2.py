@@ -15,14 +15,11 @@ runs through accepted loops (docs/results.md, "Stop 37").
                                [--gate 0.999] [cases ...]      (default: every simulated case)
 """
 import argparse
-import os
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from roverlib import drift_model, scenes, splits  # noqa: E402
-from roverlib import geometry as g  # noqa: E402
+from roverlib import drift_model, scenes, splits
+from roverlib import geometry as g
 
 CHI2_4 = {0.99: 13.277, 0.999: 18.467, 0.9999: 23.513}
 

@@ -53,12 +53,10 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the family scripts beside this one
-import numpy as np  # noqa: E402
-import poc  # noqa: E402
-import posegraph  # noqa: E402
-import real  # noqa: E402
-from roverlib import bench, methods, metrics, reasons  # noqa: E402
+import numpy as np
+from roverlib import bench, methods, metrics, programs, reasons
+
+poc, posegraph, real = (programs.load(f"bench/{f}.py") for f in ("poc", "posegraph", "real"))  # the families
 
 FAMILIES = {"poc": poc, "real": real, "posegraph": posegraph}
 PROTOCOLS = ("oracle", "sequential")  # two runs each, A and B

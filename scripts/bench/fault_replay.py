@@ -34,10 +34,11 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from long_replay import add_scene_args, corridor_scene, free_port  # noqa: E402
-from roverlib import bag as rbag  # noqa: E402
-from roverlib import bench, faults  # noqa: E402
+from roverlib import bag as rbag
+from roverlib import bench, faults, programs
+
+long_replay = programs.load("bench/long_replay.py")  # the corridor scene and a free port, as long_replay has them
+add_scene_args, corridor_scene, free_port = long_replay.add_scene_args, long_replay.corridor_scene, long_replay.free_port
 
 
 def make_runs(a):

@@ -30,12 +30,9 @@ import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the family scripts beside this one
-sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # roverlib
-import poc  # noqa: E402
-import posegraph  # noqa: E402
-import real  # noqa: E402
-from roverlib import bench, methods  # noqa: E402
+from roverlib import bench, methods, programs
+
+poc, posegraph, real = (programs.load(f"bench/{f}.py") for f in ("poc", "posegraph", "real"))  # the families
 
 FAMILIES = {"poc": poc, "real": real, "posegraph": posegraph}
 SHIPPED = (("corridor", "indoor"), ("warehouse", "indoor"), ("euroc_mh05", "indoor"))

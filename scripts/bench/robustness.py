@@ -38,9 +38,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import yaml
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the family scripts beside this one
-sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # roverlib
-from roverlib import bench, methods, metrics, splits  # noqa: E402
+from roverlib import bench, methods, metrics, programs, splits
 
 SETTINGS = {  # name -> {parameter: factor}
     "base": {},
@@ -192,11 +190,10 @@ def summary(rows, settings, spread_bound):
 
 def scenarios(a):
     """[{family, case, split, dir, flags}] of the split: each case's scenario as its family writes it."""
-    import importlib
     entries = []
     names = set(a.only.split(",")) if a.only else None
     for family in a.families.split(","):
-        module = importlib.import_module(family)
+        module = programs.load(f"bench/{family}.py")
         for case in splits.cases(family, a.split, a.quick):
             if names and case.name not in names:
                 continue

@@ -43,8 +43,7 @@ import os
 import re
 import sys
 
-sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # roverlib
-from roverlib import bench, methods, metrics  # noqa: E402
+from roverlib import bench, methods, metrics
 
 FAMILIES = ("poc", "real", "posegraph")
 ROVER = "rover+lf"

@@ -398,3 +398,18 @@ def make_scene(name, sigma=0.05, seed=0, n_true=100, n_false=100, six_dof=False,
     if yaw_bias or scale_error:
         meta.update(yaw_bias_deg_per_m=yaw_bias, scale_error=scale_error)
     return Scenario(f"{name}_s{sigma:g}_seed{seed}", kfs, cands, path.truth, meta)
+
+
+def tilted_loop():
+    """Two laps of a 3 m circle (sequence 1, VIO = truth) by a body pitched 60 deg and rolled
+    30 deg, as EuRoC's IMU is tilted, and one exact loop between headings 18 deg apart: its
+    relative rotation's yaw is 8.8 deg, loop_fusion's relative yaw (the difference of world
+    yaws) 18 deg. Returns (scenario, candidate)."""
+    tilt = g.rot_x(np.radians(30.0)) @ g.rot_y(np.radians(-60.0))
+    n, r = 40, 3.0
+    T = [g.pose(g.rot_z(2 * np.pi * k / n + np.pi / 2) @ tilt,
+                [r * np.cos(2 * np.pi * k / n), r * np.sin(2 * np.pi * k / n), 0.0]) for k in range(2 * n)]
+    q, m = n + 20, 18
+    c = Candidate(q, m, g.relative(T[m], T[q]), 1, 40)
+    keyframes = [Keyframe(k, 100.0 + 0.5 * k, 1, T[k]) for k in range(len(T))]
+    return Scenario("tilted_loop", keyframes, [c], list(T)), c

@@ -9,11 +9,10 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, shared_data, tilted_loop_scenario
+from conftest import ROOT, script, shared_data
 from roverlib import bag, datasets, geometry as g, real_data, scenario, scenes
 
-sys.path.insert(0, os.path.join(ROOT, "scripts"))
-import make_shipped_data  # noqa: E402
+make_shipped_data = script("make_shipped_data.py")
 
 
 def pose_of(p):
@@ -57,7 +56,7 @@ def test_bag_holds_the_scenario_in_replay_order(tmp_path):
 def test_candidate_message_yaw_is_loop_fusions_on_a_tilted_body():
     """The candidate message's relative_yaw is loop_fusion's (the difference of world yaws), as
     candidates.csv's; on this tilted body the relative rotation's yaw is 9 deg away from it."""
-    s, c = tilted_loop_scenario()
+    s, c = scenes.tilted_loop()
     (m,) = [m for _, topic, m in bag.scenario_messages(s) if topic == bag.CANDIDATE_TOPIC]
     world = g.wrap(g.yaw_of(s.truth[c.query][:3, :3]) - g.yaw_of(s.truth[c.match][:3, :3]))
     assert m.relative_yaw == pytest.approx(world, abs=1e-12)
@@ -90,11 +89,11 @@ def test_simulate_bag_option_and_own_trajectory(tmp_path):
     est, gt = real_data.SEQUENCES["euroc_mh01"][:2]
     with shared_data():
         est, gt = datasets.data_path(est), datasets.data_path(gt)
-    script = os.path.join(ROOT, "scripts", "simulate.py")
+    simulate = os.path.join(ROOT, "scripts", "simulate.py")
     common = ["--true", "5", "--false", "5", "--bag"]
-    subprocess.run([sys.executable, script, "--estimate", est, "--groundtruth", gt, "--out", str(tmp_path / "own")] + common,
+    subprocess.run([sys.executable, simulate, "--estimate", est, "--groundtruth", gt, "--out", str(tmp_path / "own")] + common,
                    check=True, capture_output=True)
-    subprocess.run([sys.executable, script, "--real", "euroc_mh01", "--out", str(tmp_path / "ref")] + common,
+    subprocess.run([sys.executable, simulate, "--real", "euroc_mh01", "--out", str(tmp_path / "ref")] + common,
                    check=True, capture_output=True)
     own, ref = scenario.read(str(tmp_path / "own")), scenario.read(str(tmp_path / "ref"))
     assert [k.stamp for k in own.keyframes] == [k.stamp for k in ref.keyframes]

@@ -148,9 +148,10 @@ def test_an_unchecked_key_fails(tmp_path):
     assert f"package.xml dependency 'rosunit' was not checked as a rosdep key of Noetic on focal ({NOETIC_KEYS})" in errors
 
 
-def fresh_python(code):
-    """Runs code in /usr/bin/python3 with this environment (the sourced catkin workspace)."""
-    return subprocess.run(["/usr/bin/python3", "-c", code], capture_output=True, text=True, cwd="/")
+def fresh_python(code, cwd="/"):
+    """Runs code in /usr/bin/python3 with this environment (the sourced catkin workspace), in
+    directory cwd (python3 -c imports from there, as a program imports from its own directory)."""
+    return subprocess.run(["/usr/bin/python3", "-c", code], capture_output=True, text=True, cwd=cwd)
 
 
 def test_generated_messages_import_in_a_fresh_interpreter():
@@ -193,7 +194,8 @@ def test_the_launch_and_test_files_start_python_nodes():
 def test_python_node_imports_in_a_fresh_interpreter(where, node):
     path = script_path(node)
     assert os.access(path, os.X_OK), f"{path} is not executable"
-    # the module's top level (its imports) without running main()
-    out = fresh_python(f"import importlib.util as u, sys; sys.path.insert(0, {os.path.dirname(path)!r}); "
-                       f"s = u.spec_from_file_location('node', {path!r}); s.loader.exec_module(u.module_from_spec(s))")
+    # the module's top level (its imports) without running main(), from the node's directory as
+    # when it runs as a program (its own directory first on the import path, nothing else added)
+    out = fresh_python(f"import importlib.util as u; s = u.spec_from_file_location('node', {path!r}); "
+                       f"s.loader.exec_module(u.module_from_spec(s))", cwd=os.path.dirname(path))
     assert out.returncode == 0, f"{node} (started by {where}): {out.stderr[-2000:]}"

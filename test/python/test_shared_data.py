@@ -2,6 +2,7 @@
 naming the missing file, and scripts/test_summary.py lists each skip with its reason above the
 closing line; under ROVER_REQUIRE_SHARED=1 (.ci/run: CI has ../shared) they fail instead."""
 import os
+import shutil
 import subprocess
 import sys
 
@@ -22,8 +23,8 @@ def run_pytest(tmp_path, require):
     """Runs NEEDS_DATA with ../shared/data elsewhere (ROVER_SHARED_DATA); (exit status, JUnit dir)."""
     test = tmp_path / "test_needs_data.py"
     test.write_text(NEEDS_DATA)
-    env = dict(os.environ, ROVER_SHARED_DATA=str(tmp_path / "no_shared_data"),
-               PYTHONPATH=os.pathsep.join([os.path.join(ROOT, "test", "python"), os.environ.get("PYTHONPATH", "")]))
+    shutil.copy(os.path.join(ROOT, "test", "python", "conftest.py"), str(tmp_path))  # pytest imports it beside the test
+    env = dict(os.environ, ROVER_SHARED_DATA=str(tmp_path / "no_shared_data"))
     env.pop("ROVER_REQUIRE_SHARED", None)
     if require:
         env["ROVER_REQUIRE_SHARED"] = "1"

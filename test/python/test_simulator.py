@@ -7,7 +7,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import ROOT, built_tool, script, shared_data, tilted_loop_scenario
+from conftest import ROOT, built_tool, script, shared_data
 from roverlib import geometry as g
 from roverlib import datasets, real_data, scenario, scenes
 
@@ -78,7 +78,7 @@ def test_relative_yaw_is_loop_fusions_on_a_tilted_body(tmp_path):
     yaws, which the core compares with yaw_q - yaw_m (core/pose_graph.cpp), not the yaw of the
     relative rotation: on a tilted body an exact loop then has zero innovation, and chi2 accepts
     it (with the relative rotation's yaw it was 9 deg off, d^2 48 > 18.5: rejected)."""
-    s, c = tilted_loop_scenario()
+    s, c = scenes.tilted_loop()
     R_m, R_q = s.truth[c.match][:3, :3], s.truth[c.query][:3, :3]
     world = g.wrap(g.yaw_of(R_q) - g.yaw_of(R_m))
     assert abs(np.degrees(world - g.yaw_of(c.T_rel[:3, :3]))) > 5.0, "the two conventions differ here"

@@ -13,16 +13,14 @@ loop in use exactly one accepting verdict, and the node's loop_fusion stand-in h
 used loops."""
 import os
 import signal
-import sys
 import tempfile
 import unittest
 
 import rospy
 from visualization_msgs.msg import MarkerArray
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node, Verdicts, candidate, keyframe, publishers, wait_until  # noqa: E402
-from rover_loop_fusion.srv import Optimize  # noqa: E402
+from test_node_hardening import Node, Verdicts, candidate, keyframe, publishers, wait_until  # test/ros/, beside this file
+from rover_loop_fusion.srv import Optimize
 
 PKG = "rover_loop_fusion"
 

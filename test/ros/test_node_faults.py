@@ -9,16 +9,14 @@ by candidate, and refuse the same keyframes (node_faults.test starts no node).
 Candidates name their keyframes by stamp, as the shipped bags do, except on the stopped clock,
 where a stamp names several keyframes: there by number."""
 import os
-import sys
 import tempfile
 import unittest
 
 import rospy
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node  # noqa: E402
-from test_node_reliability import assert_same_verdicts, by_index, by_stamp, replay_rows  # noqa: E402
-from roverlib import bag, bag_replay, faults, scenario  # noqa: E402
+from test_node_hardening import Node  # test/ros/, beside this file (rostest runs it as a program)
+from test_node_reliability import assert_same_verdicts, by_index, by_stamp, replay_rows
+from roverlib import bag, bag_replay, faults, scenario
 
 PKG = "rover_loop_fusion"
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))

@@ -18,7 +18,6 @@ import math
 import os
 import re
 import subprocess
-import sys
 import tempfile
 import time
 import unittest
@@ -26,9 +25,9 @@ import unittest
 import rospy
 from rover_loop_fusion.srv import Optimize
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node, PrivateMaster, Verdicts, keyframe, candidate, publishers, wait_until  # noqa: E402
-from roverlib import bag, bag_replay, scenario  # noqa: E402
+# test/ros/, beside this file (rostest runs it as a program)
+from test_node_hardening import Node, PrivateMaster, Verdicts, keyframe, candidate, publishers, wait_until
+from roverlib import bag, bag_replay, scenario, scenes
 
 PKG = "rover_loop_fusion"
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
@@ -271,9 +270,7 @@ class NodeReliability(unittest.TestCase):
         # rotation (the old convention); on a tilted body (EuRoC's IMU) an exact loop was then
         # 9 deg off and chi2 rejected it (d2 48 > 18.5). loop_fusion's loop_info[7] is the
         # difference of the keyframes' world yaws.
-        sys.path.insert(0, os.path.join(ROOT, "test", "python"))
-        from conftest import tilted_loop_scenario
-        s, _ = tilted_loop_scenario()
+        s, _ = scenes.tilted_loop()
         messages = bag.scenario_messages(s)
         for _, topic, m in messages:
             if topic == bag.CANDIDATE_TOPIC:
