@@ -45,6 +45,11 @@
 //   keyframe_ms.csv                 per keyframe: index, the wall-clock time of addKeyframe()
 //                                   (where held candidates are judged and released) [ms] and the
 //                                   decisions it produced
+//   intake.csv                      per keyframe of keyframes.csv, in its order: index, sequence,
+//                                   stamp, kept (1, or 0: refused by addKeyframe, not in the graph
+//                                   nor in the trajectories) and addKeyframe()'s message (why it
+//                                   was refused, or a warning; empty when clean). The keyframes
+//                                   the peers of the benchmarks get (roverlib/problem.py)
 //   odometry.tum                    the VIO keyframe poses
 //   verified.tum                    the verifier's estimate X at the end
 //   loop_fusion_verified.tum        loop_fusion's optimisation of the verified graph
@@ -79,6 +84,17 @@ using namespace rover_loop_fusion;
 
 namespace {
 
+// A CSV field in double quotes (a quote doubled, a line break as a space), as verdicts.csv's detail.
+std::string csvQuoted(const std::string& text) {
+  std::string out = "\"";
+  for (char ch : text) {
+    if (ch == '"') out += "\"\"";
+    else if (ch == '\n' || ch == '\r') out += ' ';
+    else out += ch;
+  }
+  return out + "\"";
+}
+
 int usage(int code) {
   std::FILE* out = code ? stderr : stdout;
   std::fprintf(out,
@@ -93,7 +109,7 @@ int usage(int code) {
                "from the core's defaults: --accept_without_prior alone is rover_replay's old behaviour).\n"
                "Output: verdicts.csv (the verdict log's columns, then verified_at_keyframe,\n"
                "decided_at_keyframe, group_first_at_keyframe), keyframe_ms.csv (addKeyframe() time per\n"
-               "keyframe), TUM trajectories.\n"
+               "keyframe), intake.csv (each keyframe kept or refused, and why), TUM trajectories.\n"
                "verifier parameters (applied in order; --config FILE reads a verifier YAML such as\n"
                "config/rover_indoor.yaml; the defaults are that file's; a boolean flag alone means true):\n");
   for (const core::Parameter& p : core::verifierParameters())
@@ -257,6 +273,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::fprintf(keyframe_csv, "index,add_keyframe_ms,decisions\n");
+  std::FILE* intake_csv = std::fopen((out_dir + "/intake.csv").c_str(), "w");
+  if (!intake_csv) {
+    std::fprintf(stderr, "rover_replay: cannot write %s/intake.csv\n", out_dir.c_str());
+    return 1;
+  }
+  std::fprintf(intake_csv, "index,sequence,stamp,kept,message\n");
   std::FILE* trials_csv = nullptr;
   if (compare_trials > 0) {
     trials_csv = std::fopen((out_dir + "/trials.csv").c_str(), "w");
@@ -422,6 +444,8 @@ int main(int argc, char** argv) {
     const double add_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     add_keyframe_ms.push_back(add_ms);
     accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
+    std::fprintf(intake_csv, "%lld,%d,%.9f,%d,%s\n", static_cast<long long>(k.index), k.sequence, k.stamp, st ? 1 : 0,
+                 csvQuoted(st.message).c_str());
     if (!st) {
       ++refused_keyframes;
       std::fprintf(keyframe_csv, "%lld,%.4f,0\n", static_cast<long long>(k.index), add_ms);
@@ -465,6 +489,7 @@ int main(int argc, char** argv) {
   for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);
   std::fclose(csv);
   std::fclose(keyframe_csv);
+  std::fclose(intake_csv);
   if (trials_csv) std::fclose(trials_csv);
 
   std::vector<core::Pose> estimate;

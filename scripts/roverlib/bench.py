@@ -233,6 +233,16 @@ def replay(scenario_dir, out_dir, protocol="sequential", args=(), snapshots=0):
     return out_dir
 
 
+def intake(run_dir):
+    """[(keyframe index, kept)] of a replay directory, in keyframes.csv's order: its intake.csv,
+    what rover_replay's addKeyframe() kept or refused (docs/scenario-format.md)."""
+    path = os.path.join(run_dir, "intake.csv")
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{path} missing: a rover_replay that writes intake.csv (rebuild the workspace)")
+    with open(path, newline="") as f:
+        return [(int(r["index"]), r["kept"] == "1") for r in csv.DictReader(f)]
+
+
 def labelled(run_dir, labels_path):
     """metrics.join of a replay directory's verdicts with a scenario's labels."""
     return metrics.join(metrics.read_verdicts(os.path.join(run_dir, "verdicts.csv")),

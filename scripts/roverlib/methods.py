@@ -120,15 +120,20 @@ def rover_flags(environment, problem, replay_args=()):
 def evaluate(case, scn_dir, problem, replay_args, out_dir, methods=ALL_METHODS, snapshots=10, time_limit=600.0,
              align="se3"):
     """Runs every method on one case. Returns (info: dict for the family's case table,
-    rows: summary rows, one per method and back end)."""
+    rows: summary rows, one per method and back end). Every method gets the keyframes that
+    ROVER's run kept (a keyframe its intake refused is left out of the problem, with the
+    candidates that name it: Problem.on_keyframes)."""
     mode = "4dof" if problem.dof in (3, 4) else "6dof"
-    loops, labels = problem.loops, problem.labels()
-    n = problem.n
-    sizes = snapshot_sizes(n, snapshots)
     runs = os.path.join(out_dir, "runs", case.name)
     # ROVER, sequential, the product's mode
     seq = bench.replay(scn_dir, os.path.join(runs, "rover"), "sequential",
                        rover_flags(case.environment, problem, replay_args), snapshots)
+    intake = bench.intake(seq)
+    if not all(kept for _, kept in intake):
+        problem = problem.on_keyframes(i for i, kept in intake if kept)
+    loops, labels = problem.loops, problem.labels()
+    n = problem.n
+    sizes = snapshot_sizes(n, snapshots)
     gt = metrics.read_tum(os.path.join(seq, "groundtruth.tum"))
     stamps = np.array(gt.timestamps)
     j = bench.labelled(seq, os.path.join(scn_dir, "candidates.csv"))
