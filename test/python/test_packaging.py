@@ -22,14 +22,17 @@ PATH_EDITS = [
     (r"\baddsitedir\b", "adds a site directory"),
     (r"\bPYTHONPATH\b", "sets the import path of a child process"),
 ]
+# not the repo's files: git, the workspace, the venv, benchmark output; other hidden folders
+# (caches, a user's own venv) too, but for .ci
 SKIP_DIRS = {".git", ".ws", ".venv", "results", "__pycache__", "node_modules"}
+SCANNED_HIDDEN = {".ci"}
 
 
 def python_files(root):
     """Every Python file under root: *.py and files whose first line names python."""
     out = []
     for d, dirs, files in os.walk(root):
-        dirs[:] = sorted(x for x in dirs if x not in SKIP_DIRS and not x.startswith("."))
+        dirs[:] = sorted(x for x in dirs if x not in SKIP_DIRS and (not x.startswith(".") or x in SCANNED_HIDDEN))
         for f in sorted(files):
             path = os.path.join(d, f)
             if f.endswith(".py"):
