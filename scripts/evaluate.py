@@ -22,8 +22,8 @@ describe a run only if no verdict was lost and none belongs to another run. A no
 row when a candidate is verified, another when a held one is released or dropped or an
 accepted one revoked: columns final, decision) is read as each candidate's final verdict, as
 rover_replay writes it; the later decisions about one pair (a candidate proposed again while
-held) complete its rows first in, first out. Refused, with one line "evaluate.py: error: FILE[:LINE]: what" and exit
-status 2 (nothing is scored):
+held) complete its rows first in, first out. Refused, with one line "evaluate.py: error:
+FILE[:LINE]: what" and exit status 2 (nothing is scored):
 - malformed input: an empty or truncated verdict log, a label or index that is not an integer,
   a missing column, a --run directory without ground truth, a TUM ground truth or trajectory
   with a value that is not finite or a repeated stamp;
