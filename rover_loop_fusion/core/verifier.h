@@ -37,7 +37,8 @@
 // replayed twice, a driver retransmits) are one piece of evidence, counted once:
 //   a copy of a held candidate is deferred, never held itself (it counts toward no
 //     confirm_count, revisit_support or group), and gets the held candidate's later decision
-//     right after it (the same kind; a released copy is revoked with its loop);
+//     right after it (the same kind, about the same loop: a host applies or removes the loop
+//     once; a released copy is revoked with its loop);
 //   a copy of a candidate rejected or dropped earlier gets that rejection's reason;
 //   a copy of a loop in the graph is refused: invalid_input, "already in the graph".
 // Each gets the numbers (score, d2, ...) of the first candidate's verdict.
