@@ -21,8 +21,9 @@ The verdict log must hold exactly one verdict per candidate of the label file: t
 describe a run only if no verdict was lost and none belongs to another run. A node's log (one
 row when a candidate is verified, another when a held one is released or dropped or an
 accepted one revoked: columns final, decision) is read as each candidate's final verdict, as
-rover_replay writes it. Refused, with one line "evaluate.py: error: FILE[:LINE]: what" and exit
-status 2 (nothing is scored):
+rover_replay writes it; the later decisions about one pair (a candidate proposed again while
+held) complete its rows first in, first out. Refused, with one line "evaluate.py: error:
+FILE[:LINE]: what" and exit status 2 (nothing is scored):
 - malformed input: an empty or truncated verdict log, a label or index that is not an integer,
   a missing column, a --run directory without ground truth, a TUM ground truth or trajectory
   with a value that is not finite or a repeated stamp;
@@ -139,24 +140,27 @@ def final_verdicts(path, rows):
     row (rover_replay's form). A candidate still held when the log ends is dropped, as
     rover_replay drops it at the end of a run (not accepted), with a warning on stderr."""
     out = []
-    open_ = {}  # (query, match) -> {"held": index, "accepted": index} of out
+    # (query, match) -> {"held": [index of out, ...], "accepted": [...]}, oldest first: the same
+    # loop proposed again while held is decided copy by copy, in the order they came (a host's
+    # later decisions about one pair come first in, first out).
+    open_ = {}
     for n, r in rows:
         key = (int(r["query_index"]), int(r["match_index"]))
         later = LATER.get(r["decision"])
-        slots = open_.setdefault(key, {})
-        if later and later in slots:
-            i = slots.pop(later)
+        slots = open_.setdefault(key, {"held": [], "accepted": []})
+        if later and slots[later]:
+            i = slots[later].pop(0)
             first = out[i][1]
             out[i] = (out[i][0], dict(first, accepted=r["accepted"], reason=r["reason"], detail=r.get("detail", ""),
                                       final="1", decision=r["decision"]))
             if r["accepted"] == "1":
-                slots["accepted"] = i
+                slots["accepted"].append(i)
             continue
         out.append((n, dict(r)))
         if _held(r):
-            slots["held"] = len(out) - 1
+            slots["held"].append(len(out) - 1)
         elif r["accepted"] == "1":
-            slots["accepted"] = len(out) - 1
+            slots["accepted"].append(len(out) - 1)
     undecided = [i for i, (_, r) in enumerate(out) if _held(r)]
     if undecided:
         n, r = out[undecided[0]]

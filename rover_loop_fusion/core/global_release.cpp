@@ -36,6 +36,7 @@ bool Verifier::holdForGlobal(const LoopCandidate& c, size_t qpos, size_t mpos, R
   h.match_pos = mpos;
   h.kind = HoldKind::kGlobal;
   if (!addToGlobalPool(h)) return false;
+  held_pairs_.emplace(PairKey(c.query_index, c.match_index), HeldPair());
   *detail += "; held for the global pass (global_check)";
   return true;
 }

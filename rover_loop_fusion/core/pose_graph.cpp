@@ -334,15 +334,22 @@ std::string KeyframeGraph::checkLoop(const LoopCandidate& c, size_t* qpos, size_
   return impl_->checkLoop(c, qpos, mpos);
 }
 
+bool KeyframeGraph::hasLoop(int64_t query_index, int64_t match_index) const {
+  const Impl& m = *impl_;
+  size_t qpos = 0, mpos = 0;
+  if (!m.find(query_index, &qpos) || !m.find(match_index, &mpos)) return false;
+  const auto ends = m.loop_ends.find(mpos);
+  return ends != m.loop_ends.end() &&
+         std::any_of(ends->second.begin(), ends->second.end(),
+                     [&](const Impl::LoopEnd& e) { return e.is_from && e.other == qpos; });
+}
+
 Status KeyframeGraph::addLoop(const LoopCandidate& c) {
   Impl& m = *impl_;
   size_t qpos = 0, mpos = 0;
   const std::string bad = m.checkLoop(c, &qpos, &mpos);
   if (!bad.empty()) return Status::Error(bad);
-  const auto ends = m.loop_ends.find(mpos);
-  if (ends != m.loop_ends.end() &&
-      std::any_of(ends->second.begin(), ends->second.end(),
-                  [&](const Impl::LoopEnd& e) { return e.is_from && e.other == qpos; }))
+  if (hasLoop(c.query_index, c.match_index))
     return Status::Error("loop " + describeIndex(c.query_index) + " -> " + describeIndex(c.match_index) +
                          " is already in the graph");
   const int qseq = m.kfs[qpos].sequence, mseq = m.kfs[mpos].sequence;

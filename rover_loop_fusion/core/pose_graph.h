@@ -131,6 +131,8 @@ class KeyframeGraph {
   /// the query's sequence to the match's frame exactly as loop_fusion shifts it
   /// (w_r_vio / w_t_vio). Refuses what checkLoop() refuses and a loop already in the graph.
   Status addLoop(const LoopCandidate& c);
+  /// Whether the loop query -> match (keyframe indices) is in the graph.
+  bool hasLoop(int64_t query_index, int64_t match_index) const;
   size_t loopCount() const;
   /// Whether the two keyframes' sequences are tied together by loops (a trajectory prior).
   bool connected(size_t a, size_t b) const;

@@ -79,6 +79,66 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
 Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
+  Verdict v;
+  if (verifyCopy(c, t0, &v)) return v;
+  v = verifyLocked(c, t0);
+  const PairKey key(c.query_index, c.match_index);
+  if (v.deferred) {
+    // Held (hold(), holdForGlobal()): its copies get its numbers. Decided already inside this
+    // verify() (a group it completed was settled at once): a drop's copies get its numbers too.
+    const auto held = held_pairs_.find(key);
+    const auto rejected = rejected_.find(key);
+    if (held != held_pairs_.end()) {
+      held->second.at_verify = v;
+    } else if (rejected != rejected_.end()) {
+      Verdict r = v;
+      r.deferred = false;
+      r.accepted = false;
+      r.reason = rejected->second.reason;
+      r.detail = rejected->second.detail;
+      rejected->second = r;
+    }
+  } else if (!v.accepted && v.reason != Reason::kInvalidInput) {
+    // invalid_input is re-derived for a copy (a keyframe may have arrived since).
+    rejected_[key] = v;
+  }
+  return v;
+}
+
+bool Verifier::verifyCopy(const LoopCandidate& c, Clock::time_point t0, Verdict* copy) {
+  const PairKey key(c.query_index, c.match_index);
+  std::ostringstream pair;
+  pair << c.query_index << " -> " << c.match_index;
+  size_t qpos = 0, mpos = 0;
+  if (!graph_.checkLoop(c, &qpos, &mpos).empty()) return false;  // verifyLocked says why
+  if (graph_.hasLoop(c.query_index, c.match_index)) {
+    *copy = withNumbers(Verdict::Reject(Reason::kInvalidInput, c,
+                                        "loop " + pair.str() + " is already in the graph: a copy of an accepted loop is "
+                                                     "counted once, not accepted again"),
+                        Verdict(), t0);
+    return true;
+  }
+  const auto held = held_pairs_.find(key);
+  if (held != held_pairs_.end()) {
+    held->second.copies.push_back(c);
+    *copy = withNumbers(Verdict::Defer(c, "a copy of held candidate " + pair.str() +
+                                              ": counted once, decided with it (" + held->second.at_verify.detail +
+                                              ")"),
+                        held->second.at_verify, t0);
+    return true;
+  }
+  const auto rejected = rejected_.find(key);
+  if (rejected != rejected_.end()) {
+    *copy = withNumbers(Verdict::Reject(rejected->second.reason, c,
+                                        "a copy of candidate " + pair.str() + ", rejected earlier: counted once (" +
+                                            rejected->second.detail + ")"),
+                        rejected->second, t0);
+    return true;
+  }
+  return false;
+}
+
+Verdict Verifier::verifyLocked(const LoopCandidate& c, Clock::time_point t0) {
   Verdict measured;  // the numbers gathered on the way to the decision
   measured.threshold = config_.metric.threshold;
   auto reject = [&](Reason reason, std::string detail) {
@@ -223,7 +283,9 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return held_.size() + global_pool_.size();
+  size_t copies = 0;
+  for (const auto& h : held_pairs_) copies += h.second.copies.size();
+  return held_.size() + global_pool_.size() + copies;
 }
 
 bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const {
@@ -231,6 +293,7 @@ bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const 
 }
 
 void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind, double d2) {
+  held_pairs_.emplace(PairKey(c.query_index, c.match_index), HeldPair());
   HeldCandidate h = heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;
@@ -248,6 +311,37 @@ void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict v
   d.candidate = c;
   d.verdict = std::move(verdict);
   decisions_.push_back(d);
+  // Its copies get the same decision, right after it.
+  const PairKey key(c.query_index, c.match_index);
+  std::vector<LoopCandidate> copies;
+  if (kind == LoopDecision::Kind::kRevoke) {
+    const auto released = released_copies_.find(key);
+    if (released == released_copies_.end()) return;
+    copies.swap(released->second);
+    released_copies_.erase(released);
+  } else {
+    const auto held = held_pairs_.find(key);
+    if (held == held_pairs_.end()) return;
+    copies.swap(held->second.copies);
+    if (kind == LoopDecision::Kind::kDrop) {
+      Verdict r = held->second.at_verify;  // its numbers at verify, the drop's outcome
+      r.deferred = false;
+      r.accepted = false;
+      r.reason = d.verdict.reason;
+      r.detail = d.verdict.detail;
+      rejected_[key] = r;
+    } else if (!copies.empty()) {
+      released_copies_[key] = copies;
+    }
+    held_pairs_.erase(held);
+  }
+  for (const LoopCandidate& copy : copies) {
+    LoopDecision e = d;
+    e.candidate = copy;
+    e.verdict.query_index = copy.query_index;
+    e.verdict.match_index = copy.match_index;
+    decisions_.push_back(e);
+  }
 }
 
 void Verifier::drop(const HeldGroup& group, const std::string& why, bool contradicted) {

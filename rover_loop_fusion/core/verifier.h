@@ -33,6 +33,15 @@
 // passes against the graph without them revokes them and is released (types.h).
 // Decisions come in the order they were made; each held candidate gets exactly one kRelease or
 // kDrop; a revoked loop is never released or accepted again.
+// Copies (the same query -> match proposed again: loop_fusion re-detects a pair, a bag is
+// replayed twice, a driver retransmits) are one piece of evidence, counted once:
+//   a copy of a held candidate is deferred, never held itself (it counts toward no
+//     confirm_count, revisit_support or group), and gets the held candidate's later decision
+//     right after it (the same kind, about the same loop: a host applies or removes the loop
+//     once; a released copy is revoked with its loop);
+//   a copy of a candidate rejected or dropped earlier gets that rejection's reason;
+//   a copy of a loop in the graph is refused: invalid_input, "already in the graph".
+// Each gets the numbers (score, d2, ...) of the first candidate's verdict.
 //
 // Every public method is safe to call from any thread (one internal mutex), never throws for
 // bad input and never leaves the graph half-changed: bad input comes back as a Status or as a
@@ -49,6 +58,7 @@
 #include <chrono>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -122,6 +132,10 @@ class Verifier {
   std::pair<Verdict, Verdict> compareTrials(const LoopCandidate& candidate, int condense_min_window);
 
  private:
+  Verdict verifyLocked(const LoopCandidate& c, std::chrono::steady_clock::time_point t0);
+  /// A copy of a held, rejected or committed candidate (see the protocol above): its verdict in
+  /// *copy, true; false if `c` is not a copy.
+  bool verifyCopy(const LoopCandidate& c, std::chrono::steady_clock::time_point t0, Verdict* copy);
   /// Holds a candidate (a deferred verdict) and settles what is due.
   void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind, double d2 = 0.0);
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
@@ -228,6 +242,15 @@ class Verifier {
   GlobalInputs last_global_inputs_;
   std::vector<LoopDecision> decisions_;    ///< not yet taken
   std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
+  using PairKey = std::pair<int64_t, int64_t>;  ///< (query, match)
+  /// A held candidate's verdict at verify and its copies, which get its decision.
+  struct HeldPair {
+    Verdict at_verify;
+    std::vector<LoopCandidate> copies;
+  };
+  std::map<PairKey, HeldPair> held_pairs_;
+  std::map<PairKey, std::vector<LoopCandidate>> released_copies_;  ///< revoked with their loop
+  std::map<PairKey, Verdict> rejected_;  ///< rejected or dropped: what a copy gets
 };
 
 }  // namespace core

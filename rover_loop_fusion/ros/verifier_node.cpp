@@ -541,14 +541,23 @@ void VerifierNode::useLoop(const core::LoopCandidate& c, core::Verdict* v) {
 }
 
 void VerifierNode::applyDecisions() {
+  // A copy of a candidate (the same query -> match again) gets its candidate's decision right
+  // after it (core/verifier.h): the loop is in use, or removed, already.
+  std::pair<int64_t, int64_t> last_pair(-1, -1);
+  core::LoopDecision::Kind last_kind = core::LoopDecision::Kind::kDrop;
   for (const core::LoopDecision& d : host_.takeDecisions()) {
     const core::LoopCandidate& c = d.candidate;  // as handed to verify(): inliers included
     core::Verdict v = d.verdict;
+    const std::pair<int64_t, int64_t> pair(c.query_index, c.match_index);
+    const bool copy = pair == last_pair && d.kind == last_kind;
+    last_pair = pair;
+    last_kind = d.kind;
     switch (d.kind) {
       case core::LoopDecision::Kind::kRelease:
-        useLoop(c, &v);
+        if (!copy || !graph_->hasLoop(c.query_index, c.match_index)) useLoop(c, &v);
         break;
       case core::LoopDecision::Kind::kRevoke: {
+        if (copy && !graph_->hasLoop(c.query_index, c.match_index)) break;
         // The node's stand-in of loop_fusion's graph drops it too (loop_fusion: has_loop = false).
         const core::Status g = graph_->removeLoop(c.query_index, c.match_index);
         if (g.ok) changed_ = true;

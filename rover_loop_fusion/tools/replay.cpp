@@ -77,6 +77,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <deque>
 #include <map>
 #include <string>
 
@@ -322,7 +323,10 @@ int main(int argc, char** argv) {
     size_t verified_at = 0, decided_at = 0, group_first_at = 0;
   };
   std::vector<Row> rows;
-  std::map<std::pair<int64_t, int64_t>, size_t> open_rows;  // deferred or accepted, by (query, match)
+  // The rows open for a later decision, by (query, match), oldest first (the same loop may be
+  // proposed again while held: the verifier decides each copy, in the order they came): held
+  // ones for their release or drop, accepted ones for a revocation.
+  std::map<std::pair<int64_t, int64_t>, std::deque<size_t>> held_rows, accepted_rows;
   std::map<std::pair<int64_t, int64_t>, size_t> last_row;   // every candidate's latest row
   size_t keyframes_held = 0;  // keyframes the verifier has accepted so far
   auto key = [](const core::LoopCandidate& c) { return std::make_pair(c.query_index, c.match_index); };
@@ -338,10 +342,12 @@ int main(int argc, char** argv) {
       group_detail.clear();
     };
     for (const core::LoopDecision& d : decisions) {
-      auto it = open_rows.find(key(d.candidate));
+      auto& open = (d.kind == core::LoopDecision::Kind::kRevoke ? accepted_rows : held_rows)[key(d.candidate)];
       if (d.kind != core::LoopDecision::Kind::kRelease || d.verdict.detail != group_detail) closeGroup();
-      if (it == open_rows.end()) continue;
-      Row& row = rows[it->second];
+      if (open.empty()) continue;
+      const size_t at = open.front();
+      open.pop_front();
+      Row& row = rows[at];
       core::Verdict& v = row.verdict;
       const int label = row.label;
       row.decided_at = keyframes_held;
@@ -354,14 +360,14 @@ int main(int argc, char** argv) {
             group_first = std::min(group_first, rows[last_row[front]].verified_at);
         }
         group_first = std::min(group_first, row.verified_at);
-        group_rows.push_back(it->second);
+        group_rows.push_back(at);
       }
       v.accepted = d.verdict.accepted;
       v.deferred = false;
       v.reason = d.verdict.reason;
       v.detail = std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + v.detail + ")";
       row.decision = core::toString(d.kind);
-      if (!v.accepted) open_rows.erase(it);
+      if (v.accepted) accepted_rows[key(d.candidate)].push_back(at);
       if (!quiet)
         std::printf("%7lld -> %7lld  label %2d  %-8s %s\n", static_cast<long long>(d.candidate.query_index),
                     static_cast<long long>(d.candidate.match_index), label, core::toString(d.kind),
@@ -410,7 +416,8 @@ int main(int argc, char** argv) {
     row.verified_at = row.decided_at = row.group_first_at = keyframes_held;
     rows.push_back(row);
     last_row[key(c)] = rows.size() - 1;
-    if (v.accepted || v.deferred) open_rows[key(c)] = rows.size() - 1;
+    if (v.deferred) held_rows[key(c)].push_back(rows.size() - 1);
+    if (v.accepted) accepted_rows[key(c)].push_back(rows.size() - 1);
     if (!quiet)
       std::printf("%7lld -> %7lld  label %2d  %-8s %-22s score %8.3f  %6.2f ms\n",
                   static_cast<long long>(c.query_index), static_cast<long long>(c.match_index), sc.label,

@@ -190,6 +190,34 @@ def test_a_nodes_log_is_read_as_each_candidates_final_verdict(tmp_path, capsys):
     assert status == 2 and "decision 'keep' is not one of verify, release, drop, revoke" in err[0]
 
 
+def test_a_nodes_log_with_a_repeated_held_candidate_is_read_copy_by_copy(tmp_path, capsys):
+    # issue 45 item 3: one "held" slot per pair: a candidate held and proposed again while held
+    # (its copies are decided with it, in the order they came) left "2 candidate(s) still held
+    # when the log ends" and "2 verdict(s) for no candidate", exit 2, on a whole log.
+    c = labels(tmp_path, [(10, 1, 1)] * 3 + [(20, 2, 0)] * 3 + [(30, 3, 1)] * 2)
+    rows = [(10, 1, 0, "deferred", 0.3, 0, "verify")] * 3 + \
+           [(20, 2, 0, "deferred", 0.4, 0, "verify")] * 3 + \
+           [(30, 3, 0, "deferred", 0.1, 0, "verify"),
+            (30, 3, 1, "accepted", 0.1, 1, "release"),           # released, then its copy
+            (30, 3, 0, "deferred", 0.1, 0, "verify")] + \
+           [(10, 1, 1, "accepted", "nan", 1, "release")] * 3 + \
+           [(20, 2, 0, "unconfirmed", "nan", 1, "drop")] * 3 + \
+           [(30, 3, 1, "accepted", "nan", 1, "release"),
+            (30, 3, 0, "revoked", "nan", 1, "revoke"),            # the first release revoked
+            (30, 3, 0, "revoked", "nan", 1, "revoke")]            # and the copy's
+    status, err = run(capsys, "--verdicts", node_log(tmp_path, rows), "--labels", c)
+    assert (status, err) == (0, []), err
+    assert "8 labelled candidates (5 true, 3 false)" in run.out
+    assert "TP 3 FP 0 TN 3 FN 2" in run.out
+    got = evaluate.read_verdicts(node_log(tmp_path, rows))
+    assert [(r["query_index"], r["decision"], r["score"]) for r in got] == \
+        [("10", "release", "0.3")] * 3 + [("20", "drop", "0.4")] * 3 + [("30", "revoke", "0.1")] * 2
+    # the last copy's decision missing: that one copy is still held when the log ends
+    status, err = run(capsys, "--verdicts", node_log(tmp_path, rows[:10] + rows[11:]), "--labels", c)
+    assert status == 0 and len(err) == 1 and "1 candidate(s) still held when the log ends" in err[0], err
+    assert "TP 2 FP 0 TN 3 FN 3" in run.out
+
+
 def test_metrics_json_is_strict_json(tmp_path, capsys):
     # Only true loops: AP and MR are undefined; nothing accepted would make precision undefined.
     import json

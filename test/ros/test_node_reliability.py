@@ -2,9 +2,9 @@
 """rover_verifier_node and rover_replay against issue 22's reliability findings, each node started
 by the test with its own parameters (node_reliability.test starts none):
 
-- a repeated candidate (the same loop again), whose commit the verifier refuses: the node and
-  rover_replay give it the same invalid_input verdict ("... refused to commit it"); neither
-  reports it accepted;
+- a repeated candidate (the same loop again), which the verifier refuses as a copy of a loop in
+  the graph: the node and rover_replay give it the same invalid_input verdict ("... already in
+  the graph"); neither reports it accepted;
 - queue_size: a value too small for a burst is raised with a warning, the verdict queue holds a
   burst for a slow subscriber whatever queue_size says, and messages beyond the inbox are not
   processed but every candidate gets a verdict (a keyframe beyond it is refused, saying why);
@@ -115,9 +115,9 @@ class NodeReliability(unittest.TestCase):
 
     def test_a_repeated_candidate_gets_the_same_verdict_from_the_node_and_rover_replay(self):
         # issue 22 item 4: the corridor's candidates of the first 250 keyframes, each proposed
-        # twice in a row. The second of an accepted loop is accepted by verify() and refused
-        # by commit() ("already in the graph"): rover_replay reported it accepted (TP counted
-        # twice), the node invalid_input.
+        # twice in a row. The second of an accepted loop is a copy of a loop in the graph:
+        # verify() refuses it (invalid_input, "already in the graph"; before, verify() accepted
+        # it and commit() refused it, and rover_replay reported it accepted: TP counted twice).
         s = scenario.read(os.path.join(ROOT, "data", "corridor"))
         s.keyframes = [k for k in s.keyframes if k.index < 250]
         s.truth = s.truth[:len(s.keyframes)]
@@ -130,12 +130,12 @@ class NodeReliability(unittest.TestCase):
         self.assertGreater(len(accepted), 3, "the scenario must hold accepted loops")
         keys = [(r["query_index"], r["match_index"]) for r in accepted]
         self.assertEqual(len(keys), len(set(keys)), "rover_replay reports a loop accepted twice")
-        refused = [r for r in rows if "refused to commit it" in r["detail"]]
+        refused = [r for r in rows if "already in the graph" in r["detail"]]
         self.assertEqual(len(refused), len(accepted), "every repeat of an accepted loop is refused")
-        self.assertTrue(all(r["reason"] == "invalid_input" and "already in the graph" in r["detail"] for r in refused))
+        self.assertTrue(all(r["reason"] == "invalid_input" for r in refused))
         assert_same_verdicts(self, verdicts, rows)
-        self.assertEqual([v.detail.split("; but ")[-1] for v in verdicts if "refused to commit" in v.detail],
-                         [r["detail"].split("; but ")[-1] for r in refused])
+        self.assertEqual([v.detail for v in verdicts if "already in the graph" in v.detail],
+                         [r["detail"] for r in refused])
 
     def test_a_small_queue_size_is_raised_with_a_warning_and_a_slow_subscriber_gets_every_verdict(self):
         # issue 22 item 6: queue_size 1 was accepted and also set the verdict queue: with a slow
