@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -121,7 +122,8 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
       // Stamped before the previous keyframe but plausibly after an earlier one, and every
       // keyframe between them stamped after it: their stamps were the wrong ones (messages
       // stamped late, up to jump_confirmations - 1 in a row; as many in a row had the evidence
-      // of a new clock, and coming back from it needs the same). Kept; the late keyframes keep
+      // of a new clock, and coming back from it needs the same; more than one only when their
+      // stamps stand out). Kept; the late keyframes keep
       // their stamps as their names. The earlier keyframe may carry this stamp when the clock
       // stopped (a stamp frozen, and one message of the stretch stamped late).
       const size_t last = m.kfs.size() - 1;
@@ -136,6 +138,15 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
                              (kf.vio.t - before.vio.t).norm() <= config_.input.max_keyframe_jump &&
                              !(kf.vio.t == before.vio.t && kf.vio.q.coeffs() == before.vio.q.coeffs());
         if (!stopped && !m.implausibleStep(before, kf).empty()) break;
+        if (late >= 2) {
+          // Several wrong stamps explain a keyframe only when they stand out: each further ahead
+          // of it than it is after the keyframe before them (two messages stamped 1000 s late).
+          // Otherwise the new keyframe's stamp is the wrong one (stamped between two earlier
+          // keyframes): refused.
+          double ahead = std::numeric_limits<double>::infinity();
+          for (size_t p = last - late + 1; p <= last; ++p) ahead = std::min(ahead, m.kfs[p].stamp - stamp);
+          if (!(ahead > stamp - before.stamp)) break;
+        }
         std::ostringstream w;
         w.precision(17);
         const std::string first = describeIndex(m.kfs[last - late + 1].index), newest = describeIndex(prev->index);

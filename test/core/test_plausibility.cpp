@@ -238,6 +238,10 @@ TEST(StampJump, TwoKeyframesStampedLateInARowCostNoKeyframe) {
   ASSERT_TRUE(next.ok) << next.message;
   EXPECT_NE(next.message.find("keyframes 100 .. 101's stamps were wrong"), std::string::npos) << next.message;
   EXPECT_TRUE(v.addKeyframe(103, 113.0, 1, Eigen::Vector3d(51.5, 0, 0), kI).ok);
+  // A stamp between two earlier keyframes' is its own fault, not two late stamps: refused.
+  Verifier u;
+  fill(u, 100);
+  EXPECT_FALSE(u.addKeyframe(100, 107.5, 1, Eigen::Vector3d(50.0, 0, 0), kI).ok);
   // As many late keyframes in a row as confirm a new clock are one: coming back from it is a
   // step back, confirmed the same way.
   Verifier w;
