@@ -1,9 +1,10 @@
 // Keyframe intake of the pose graph (KeyframeGraph::addKeyframe): the checks of a new keyframe
 // (index, sequence, finite pose, unit quaternion), the plausibility of its step from the
 // previous keyframe of its sequence (max_keyframe_jump, max_stamp_jump), the stamp faults told
-// apart from a jump (a repeated message, a stopped clock, one keyframe stamped late) and the
-// recovery from a jump (jump_confirmations: a relocation starts a new segment, or a new clock;
-// a lone first keyframe the run contradicts is discredited); then its
+// apart from a jump (a repeated message, a stopped clock, keyframes stamped late, also on a
+// stopped clock) and the recovery from a jump (jump_confirmations: a relocation starts a new
+// segment, or a new clock; first keyframes fewer than the run that contradicts them are
+// discredited); then its
 // estimate, drift moments and odometry edges. Also the segments' union-find (root, componentOf):
 // odometry joins keyframes of one segment, loops join segments.
 #include "rover_loop_fusion/core/pose_graph_impl.h"
@@ -12,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -95,8 +97,9 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     // unless it is the last of `jump_confirmations` consecutive keyframes that each follow the
     // one before plausibly: then the VIO really relocated (a new segment) or the clock jumped.
     // Three stamp faults are told apart from a jump first (one stamp policy for every host):
-    // a repeated message, a clock that stopped, and one keyframe stamped late.
+    // a repeated message, a clock that stopped, and keyframes stamped late.
     std::string implausible = m.implausibleStep(*prev, kf);
+    bool still_stopped = false;  // stamped like the keyframe before a late one: the clock is still stopped
     const bool step_ok = (kf.vio.t - prev->vio.t).norm() <= config_.input.max_keyframe_jump;
     if (!implausible.empty() && step_ok && stamp == prev->stamp) {
       const bool same_pose = kf.vio.t == prev->vio.t && kf.vio.q.coeffs() == prev->vio.q.coeffs();
@@ -116,21 +119,50 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
       }
       m.clock_stopped = true;
     } else if (!implausible.empty() && step_ok && stamp < prev->stamp && m.kfs.size() >= 2) {
-      // Stamped before the previous keyframe but plausibly after the one before it: the
-      // previous keyframe's stamp was the wrong one (one message stamped late). Kept; the
-      // previous keyframe keeps its stamp as its name.
-      const Impl::Keyframe& before = m.kfs[m.kfs.size() - 2];
-      if (before.sequence == sequence && before.segment == prev->segment && m.implausibleStep(before, kf).empty()) {
+      // Stamped before the previous keyframe but plausibly after an earlier one, and every
+      // keyframe between them stamped after it: their stamps were the wrong ones (messages
+      // stamped late, up to jump_confirmations - 1 in a row; as many in a row had the evidence
+      // of a new clock, and coming back from it needs the same; more than one only when their
+      // stamps stand out). Kept; the late keyframes keep
+      // their stamps as their names. The earlier keyframe may carry this stamp when the clock
+      // stopped (a stamp frozen, and one message of the stretch stamped late).
+      const size_t last = m.kfs.size() - 1;
+      const int most = std::max(1, config_.input.jump_confirmations - 1);
+      for (int late = 1; late <= most && static_cast<size_t>(late) <= last; ++late) {
+        const Impl::Keyframe& late_kf = m.kfs[last - late + 1];
+        const Impl::Keyframe& before = m.kfs[last - late];
+        if (late_kf.sequence != sequence || late_kf.segment != prev->segment || !(late_kf.stamp > stamp)) break;
+        if (before.sequence != sequence || before.segment != prev->segment) break;
+        if (before.stamp > stamp) continue;  // late too: look further back
+        const bool stopped = before.stamp == stamp &&
+                             (kf.vio.t - before.vio.t).norm() <= config_.input.max_keyframe_jump &&
+                             !(kf.vio.t == before.vio.t && kf.vio.q.coeffs() == before.vio.q.coeffs());
+        if (!stopped && !m.implausibleStep(before, kf).empty()) break;
+        if (late >= 2) {
+          // Several wrong stamps explain a keyframe only when they stand out: each further ahead
+          // of it than it is after the keyframe before them (two messages stamped 1000 s late).
+          // Otherwise the new keyframe's stamp is the wrong one (stamped between two earlier
+          // keyframes): refused.
+          double ahead = std::numeric_limits<double>::infinity();
+          for (size_t p = last - late + 1; p <= last; ++p) ahead = std::min(ahead, m.kfs[p].stamp - stamp);
+          if (!(ahead > stamp - before.stamp)) break;
+        }
         std::ostringstream w;
         w.precision(17);
-        w << who << "stamp " << stamp << " before keyframe " << describeIndex(prev->index) << "'s (" << prev->stamp
-          << ") but plausibly after keyframe " << describeIndex(before.index) << "'s (" << before.stamp
-          << "): keyframe " << describeIndex(prev->index) << "'s stamp was wrong (stamped late); kept";
+        const std::string first = describeIndex(m.kfs[last - late + 1].index), newest = describeIndex(prev->index);
+        const std::string named = late == 1 ? "keyframe " + newest : "keyframes " + first + " .. " + newest;
+        w << who << "stamp " << stamp << " before keyframe " << newest << "'s (" << prev->stamp << ") but "
+          << (stopped ? "equal to" : "plausibly after") << " keyframe " << describeIndex(before.index) << "'s ("
+          << before.stamp << (stopped ? ", the clock stopped" : "") << "): " << named << "'s "
+          << (late == 1 ? "stamp was" : "stamps were") << " wrong (stamped late); kept";
         status = Status::Warning(w.str());
         implausible.clear();
+        still_stopped = stopped;
+        break;
       }
     }
-    if (implausible.empty() && stamp != prev->stamp) m.clock_stopped = false;
+    if (still_stopped) m.clock_stopped = true;
+    else if (implausible.empty() && stamp != prev->stamp) m.clock_stopped = false;
     if (!implausible.empty()) {
       Impl::Suspect& sp = m.suspect;
       const bool follows = sp.run > 0 && sp.keyframe.sequence == sequence &&
@@ -145,24 +177,38 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
                              " consistent with it would be taken as a relocation (jump_confirmations)");
       }
       const bool relocated = !step_ok;
-      // The previous keyframe is its sequence's only one: the keyframes that agree with each
-      // other outvote it (the first pose of a session needs the same evidence as any jump).
+      // The keyframes before the jump are the first of their sequence and fewer than the run
+      // that agrees with each other and not with them (one bad first pose, or a few that agree
+      // with each other): the run outvotes them (the first poses of a session need the same
+      // evidence as any jump). They are discredited, and the sequence goes on from the run.
       const size_t prev_pos = m.kfs.size() - 1;
-      const bool lone_first = relocated && (prev_pos == 0 || m.kfs[prev_pos - 1].sequence != sequence) &&
-                              m.loop_ends.count(prev_pos) == 0;
+      size_t first_pos = prev_pos;
+      while (first_pos > 0 && m.kfs[first_pos - 1].sequence == sequence) --first_pos;
+      const size_t before_jump = prev_pos - first_pos + 1;
+      bool lone_first = relocated && before_jump < static_cast<size_t>(run);
+      for (size_t p = first_pos; lone_first && p <= prev_pos; ++p)
+        if (m.kfs[p].segment != prev->segment || m.loop_ends.count(p) != 0 || m.discredited.count(p) != 0)
+          lone_first = false;
       if (relocated) kf.segment = m.next_segment--;
+      const std::string bad = before_jump == 1 ? "keyframe " + describeIndex(m.kfs[first_pos].index)
+                                               : "keyframes " + describeIndex(m.kfs[first_pos].index) + " .. " +
+                                                     describeIndex(m.kfs[prev_pos].index);
       if (lone_first) {
         std::ostringstream why;
-        why << run << " keyframes after it agree with each other and not with it (" << implausible
-            << "): a bad first pose of sequence " << sequence;
-        m.discredited[prev_pos] = why.str();
+        why << run << " keyframes after " << (before_jump == 1 ? "it" : "them") << " agree with each other and not with "
+            << (before_jump == 1 ? "it" : "them") << " (" << implausible << "): "
+            << (before_jump == 1 ? "a bad first pose" : "bad first poses") << " of sequence " << sequence;
+        for (size_t p = first_pos; p <= prev_pos; ++p) m.discredited[p] = why.str();
       }
       m.clock_stopped = false;
       status = Status::Warning(
           who + implausible + ": accepted after " + std::to_string(run) + " consecutive keyframes agreed (" +
-          (lone_first ? "keyframe " + describeIndex(prev->index) + ", the first of sequence " + std::to_string(sequence) +
-                            ", is discredited: a bad first pose; loops that name it are refused, and sequence " +
-                            std::to_string(sequence) + " goes on from here"
+          (lone_first ? bad + ", the first of sequence " +
+                            std::to_string(sequence) + (before_jump == 1 ? ", is discredited: a bad first pose; loops "
+                                                                           "that name it are refused"
+                                                                         : ", are discredited: bad first poses; loops "
+                                                                           "that name them are refused") +
+                            ", and sequence " + std::to_string(sequence) + " goes on from here"
            : relocated ? "the VIO relocated: a new segment of sequence " + std::to_string(sequence) +
                              " starts here, without odometry to the keyframes before; loops across the jump "
                              "have no trajectory prior until one ties the two"

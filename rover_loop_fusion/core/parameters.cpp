@@ -12,13 +12,34 @@
 namespace rover_loop_fusion {
 namespace core {
 
+std::string formatNumber(double v) {
+  char buf[40];
+  if (std::isfinite(v) && v == std::floor(v) && std::fabs(v) < 1e15) {
+    std::snprintf(buf, sizeof buf, "%.0f", v);
+    return buf;
+  }
+  for (int digits = 6; digits <= 17; ++digits) {
+    std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+    if (!std::isfinite(v) || std::strtod(buf, nullptr) == v) break;
+  }
+  return buf;
+}
+
 namespace {
 
-/// Human-readable number: up to 6 significant digits ("0.2", "1e-04", "3600").
-std::string shortNumber(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
+std::string shortNumber(double v) { return formatNumber(v); }
+
+/// A value as the user wrote it, so that a refusal shows why: text quoted, a number read from
+/// text as written ("1e7"), a floating-point number with an integer value with its point ("60.0").
+std::string writtenValue(const ParameterValue& v) {
+  switch (v.type) {
+    case ParameterValue::Type::kText: return "'" + v.text + "'";
+    case ParameterValue::Type::kBoolean: return v.toString();
+    case ParameterValue::Type::kNumber: break;
+  }
+  if (!v.text.empty()) return v.text;
+  const std::string n = formatNumber(v.number);
+  return !v.integral && std::isfinite(v.number) && n.find_first_of(".e") == std::string::npos ? n + ".0" : n;
 }
 
 std::string withUnit(const std::string& text, const std::string& unit) {
@@ -376,7 +397,9 @@ ParameterValue ParameterValue::parse(const std::string& scalar) {
     const bool overflow = errno == ERANGE && std::isinf(v);
     if (end == s.c_str() + s.size() && !overflow) {
       const bool integral = s.find_first_not_of("+-0123456789") == std::string::npos;
-      return Number(v, integral);
+      ParameterValue n = Number(v, integral);
+      n.text = s;  // as written, for messages
+      return n;
     }
   }
   if (s.size() >= 2 && (s[0] == '"' || s[0] == '\'') && s.back() == s[0]) return Text(s.substr(1, s.size() - 2));
@@ -412,7 +435,7 @@ std::string Parameter::range() const {
 std::string Parameter::defaultText() const { return get(VerifierConfig()).toString(); }
 
 std::string Parameter::check(const ParameterValue& v) const {
-  const std::string got = " (got " + (v.type == ParameterValue::Type::kText ? "'" + v.text + "'" : v.toString()) + ")";
+  const std::string got = " (got " + writtenValue(v) + ")";
   switch (type) {
     case Type::kNumber:
     case Type::kInteger: {
@@ -420,7 +443,12 @@ std::string Parameter::check(const ParameterValue& v) const {
       const bool ok = v.type == ParameterValue::Type::kNumber && (!is_integer || v.integral) &&
                       (min_open ? v.number > min : v.number >= min) && v.number <= max;
       if (ok) return std::string();
-      if (is_integer) return "must be an integer in [" + shortNumber(min) + ", " + shortNumber(max) + "]" + got;
+      if (is_integer) {
+        const bool fraction = v.type == ParameterValue::Type::kNumber && !v.integral;
+        return "must be an integer in [" + shortNumber(min) + ", " + shortNumber(max) + "]" +
+               (fraction ? " (got " + writtenValue(v) + ", not an integer: write it without a point or exponent)"
+                         : got);
+      }
       if (min_open && min == 0.0) return "must be a positive number up to " + withUnit(shortNumber(max), unit) + got;
       return "must be a number in " + range() + got;
     }

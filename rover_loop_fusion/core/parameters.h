@@ -17,6 +17,10 @@
 namespace rover_loop_fusion {
 namespace core {
 
+/// A number as messages print it: an integer value in full ("10000000"), otherwise the fewest
+/// significant digits that read back as the same value ("0.2", "0.999999999999").
+std::string formatNumber(double v);
+
 /// A value as a reader found it: a number (an integer if written as one), a boolean, or text.
 struct ParameterValue {
   enum class Type { kNumber, kBoolean, kText };
@@ -24,7 +28,7 @@ struct ParameterValue {
   double number = 0.0;
   bool integral = false;  ///< a number written as an integer (no '.', exponent, inf or nan)
   bool boolean = false;
-  std::string text;
+  std::string text;  ///< the text; for a number parse() read, as written (messages)
 
   static ParameterValue Number(double v, bool integral);
   static ParameterValue Boolean(bool b);

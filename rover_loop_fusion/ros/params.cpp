@@ -24,6 +24,11 @@ void ParamReader::integer(const std::string& key, int* value) {
   XmlRpc::XmlRpcValue v;
   if (!nh_.getParam(key, v)) return;
   if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) *value = static_cast<int>(v);
+  else if (v.getType() == XmlRpc::XmlRpcValue::TypeDouble) {
+    std::string got = core::formatNumber(static_cast<double>(v));
+    if (got.find_first_of(".en") == std::string::npos) got += ".0";  // (a floating-point value, as written)
+    error(key, "must be an integer (got " + got + ", not an integer: write it without a point or exponent)");
+  }
   else wrongType(key, "an integer");
 }
 

@@ -65,6 +65,7 @@ struct VerdictLog::State {
   std::string path;
   std::string header;
   bool header_pending = false;
+  bool header_tried = false;  // written (or tried) before any row was queued
   bool regular_file = false;
   int fd = -1;            // -1: FIFO waiting for a reader, or open failed
   bool open_failed = false;
@@ -197,6 +198,7 @@ void VerdictLog::writerLoop() {
       const int err = errno;
       if (fd >= 0) {
         s.fd = fd;
+        s.header_tried = false;
         ROS_INFO("[rover] verdict log %s: a reader opened it, writing", s.path.c_str());
       } else if (err != ENXIO) {
         s.open_failed = true;
@@ -205,6 +207,18 @@ void VerdictLog::writerLoop() {
       }
     }
     const bool waiting_for_reader = s.fd < 0 && !s.open_failed;
+    if (s.queue.empty() && s.header_pending && s.fd >= 0 && !s.header_tried) {
+      // The header as soon as the file is open, so that a log of a run without verdicts is a
+      // CSV file with its header, not an empty file. Tried once here; if it fails (a full disk),
+      // again before each batch, as below.
+      s.header_tried = true;
+      const int fd = s.fd;
+      lock.unlock();
+      const int err = s.writeRecord(fd, s.header);
+      lock.lock();
+      if (err == 0) s.header_pending = false;
+      continue;
+    }
     if (s.queue.empty() || waiting_for_reader) {
       if (s.queue.empty()) s.drained.notify_all();
       if (s.stop) return;

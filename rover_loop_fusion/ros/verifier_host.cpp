@@ -9,6 +9,8 @@
 #include <ros/param.h>
 #include <ros/this_node.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -105,12 +107,8 @@ const char* relocalisationText(Relocalisation policy) {
   return "a first loop between unconnected sequences, e.g. into a loaded map, is rejected";
 }
 
-template <typename T>
-std::string str(T value) {
-  std::ostringstream s;
-  s << value;
-  return s.str();
-}
+std::string str(int value) { return std::to_string(value); }
+std::string str(double value) { return core::formatNumber(value); }
 
 }  // namespace
 
@@ -232,6 +230,19 @@ VerifierHost::Start VerifierHost::start(const HostInfo& info, int verdict_queue,
     return out;
   }
 
+  if (!p.verdict_log.empty() && p.verdict_log[0] != '/') {
+    // A relative path is relative to the host's working directory (roslaunch: ~/.ros), which
+    // nobody looks at: resolved here and said.
+    std::vector<char> cwd(4096);
+    if (::getcwd(cwd.data(), cwd.size())) {
+      const std::string absolute = std::string(cwd.data()) + "/" + p.verdict_log;
+      ROS_INFO("[rover] %s '%s' is a relative path: the verdict log is %s (in the working directory of %s; give an "
+               "absolute path to put it elsewhere)",
+               resolve("verdict_log").c_str(), p.verdict_log.c_str(), absolute.c_str(),
+               ros::this_node::getName().c_str());
+      p.verdict_log = absolute;
+    }
+  }
   VerdictOutput::Options o;
   o.frame_id = p.frame_id;
   o.markers = p.publish_markers;

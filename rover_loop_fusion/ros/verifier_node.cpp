@@ -23,6 +23,9 @@ namespace rover_loop_fusion {
 namespace {
 
 const size_t kRefusedKept = 10000;  // refused keyframe messages remembered to explain verdicts
+/// Kept keyframes a new one is compared with to find those stamped late (the intake keeps at
+/// most jump_confirmations - 1 in a row, and jump_confirmations is at most 100).
+const size_t kRecentKept = 100;
 /// The least inbox: what arrives while one verification or optimisation runs (a bag at 400
 /// keyframes/s and a 200 ms time budget: 80 messages; loop_fusion's optimisation of a long run
 /// on the main thread: seconds). A smaller ~queue_size is raised to it with a ROS_WARN.
@@ -296,7 +299,6 @@ void VerifierNode::drainInbox() { drainSome(static_cast<size_t>(-1)); }
 void VerifierNode::onKeyframe(const nav_msgs::Odometry::ConstPtr& msg) {
   guarded("keyframe message", [&] {
     const int64_t index = next_index_++;
-    passStamp(toNs(msg->header.stamp));
     addKeyframe(*msg, index);
     wake(toNs(msg->header.stamp), index);
   });
@@ -319,7 +321,6 @@ void VerifierNode::onDropped(const Incoming& item) {
       return;
     }
     const int64_t index = next_index_++;
-    passStamp(item.dropped_stamp_ns);
     refuseKeyframe(index, item.dropped_stamp_ns, "not processed: " + droppedText());
     wake(item.dropped_stamp_ns, index);  // candidates waiting for it: rejected, saying why
   });
@@ -357,7 +358,7 @@ void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg, int64_t index) {
     refuseKeyframe(index, ns, s.message);
   } else {
     if (s.warning()) ROS_WARN("[rover] keyframe message %ld: %s", static_cast<long>(index), s.message.c_str());
-    if (!by_stamp_.emplace(ns, index).second) shared_stamps_.insert(ns);
+    nameByStamp(ns, index);
     stamp_of_[index] = ns;
     newest_stamp_ns_ = have_keyframe_ ? std::max(newest_stamp_ns_, ns) : ns;
     have_keyframe_ = true;
@@ -371,10 +372,32 @@ void VerifierNode::addKeyframe(const nav_msgs::Odometry& msg, int64_t index) {
   applyDecisions();
 }
 
-void VerifierNode::passStamp(int64_t ns) {
-  if (have_message_ && ns > last_message_ns_) passed_stamp_ns_ = std::max(passed_stamp_ns_, last_message_ns_);
-  last_message_ns_ = ns;
-  have_message_ = true;
+void VerifierNode::nameByStamp(int64_t ns, int64_t index) {
+  const bool stopped = have_keyframe_ && last_kept_ns_ == ns;  // the same stamp as the keyframe kept before
+  last_kept_ns_ = ns;
+  // Recent keyframes stamped after this one were stamped late (the intake kept this one as
+  // plausibly after the keyframe before them).
+  for (const std::pair<int64_t, int64_t>& r : recent_kept_)
+    if (r.second > ns) stamped_late_.insert(r.first);
+  recent_kept_.emplace_back(index, ns);
+  if (recent_kept_.size() > kRecentKept) recent_kept_.pop_front();
+  if (stamped_late_.size() > kRefusedKept) stamped_late_.erase(stamped_late_.begin());
+  auto named = by_stamp_.emplace(ns, index);
+  if (named.second || shared_stamps_.count(ns)) return;
+  if (stopped) {
+    // Consecutive keyframes with one stamp: the clock stopped, and the stamp names none of them.
+    shared_stamps_.insert(ns);
+    return;
+  }
+  // An earlier keyframe, not the one before, carries this stamp: its stamp was the wrong one (one
+  // stamped late onto a stamp still to come, or the clock went back past it). The stamp names the
+  // keyframe that carries it in order; the earlier one keeps its number as its name.
+  const int64_t earlier = named.first->second;
+  named.first->second = index;
+  ROS_WARN("[rover] keyframe message %ld: stamp %s is keyframe %ld's too, which came earlier out of order (its stamp "
+           "was wrong): the stamp names keyframe %ld from now on; name keyframe %ld by its number",
+           static_cast<long>(index), stampText(rosTimeFromNs(ns)).c_str(), static_cast<long>(earlier),
+           static_cast<long>(index), static_cast<long>(earlier));
 }
 
 void VerifierNode::refuseKeyframe(int64_t index, int64_t ns, const std::string& why) {
@@ -394,7 +417,7 @@ void VerifierNode::refuseKeyframe(int64_t index, int64_t ns, const std::string& 
 }
 
 VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& stamp, const char* role,
-                                               int64_t* found, std::string* why) const {
+                                               int64_t* found, std::string* why, bool settled) const {
   const std::string who = std::string(role) + " keyframe ";
   if (index < -1) {
     *why = who + "index " + std::to_string(index) + " is negative (-1 names a keyframe by its stamp)";
@@ -433,6 +456,15 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
              "so it names none of them; name keyframes by their number";
       return Resolution::kInvalid;
     }
+    if (!settled && std::string(role) == "query" && stamped_late_.count(hit->second)) {
+      // The stamp of a keyframe stamped late, onto a stamp still to come: a candidate that
+      // names it after the keyframes that followed may be about the keyframe that carries it in
+      // order, which has not arrived. It waits for that one up to candidate_timeout, then names
+      // the late keyframe.
+      *why = who + "with stamp " + stampText(stamp) + " (keyframe " + std::to_string(hit->second) +
+             "'s, stamped late) has not arrived in order";
+      return Resolution::kWait;
+    }
     *found = hit->second;
     return Resolution::kFound;
   }
@@ -444,13 +476,12 @@ VerifierNode::Resolution VerifierNode::resolve(int64_t index, const ros::Time& s
            (reason != refused_by_index_.end() ? " (" + reason->second + ")" : std::string());
     return Resolution::kInvalid;
   }
-  if (ns > passed_stamp_ns_ + tol) {  // (passed: see passStamp)
-    *why = who + "with stamp " + stampText(stamp) + " has not arrived";
-    return Resolution::kWait;
-  }
-  *why = "no " + who + "with stamp " + stampText(stamp) + " (keyframes are named by the stamp of a keyframe "
-         "pose message, or by their number in arrival order)";
-  return Resolution::kInvalid;
+  // Not arrived: keyframe stamps need not increase (stamped late, a clock that went back), so
+  // no stamp is ever "passed": a candidate waits candidate_timeout from its arrival for its query
+  // keyframe. The match is older than the query: once the query has arrived, a match that has not
+  // is invalid (tryDecide).
+  *why = who + "with stamp " + stampText(stamp) + " has not arrived";
+  return Resolution::kWait;
 }
 
 // ---- waiting candidates ----------------------------------------------------------------------
@@ -460,10 +491,10 @@ VerifierNode::WaitKey VerifierNode::waitKey(int64_t index, const ros::Time& stam
   return WaitKey{true, toNs(stamp) - static_cast<int64_t>(std::llround(params_.stamp_tolerance * 1e9))};
 }
 
-bool VerifierNode::tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits) {
+bool VerifierNode::tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits, bool settled) {
   int64_t q = -1, m = -1;
   std::string why_q, why_m;
-  const Resolution rq = resolve(msg.query_index, msg.query_stamp, "query", &q, &why_q);
+  const Resolution rq = resolve(msg.query_index, msg.query_stamp, "query", &q, &why_q, settled);
   const Resolution rm = resolve(msg.match_index, msg.match_stamp, "match", &m, &why_m);
   if (rq == Resolution::kInvalid) {
     reject(msg, q, m, why_q);
@@ -477,16 +508,22 @@ bool VerifierNode::tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* wai
     reject(msg, q, m, why_m);
   } else if (rm == Resolution::kFound) {
     verify(msg, q, m);
-  } else {
+  } else if (msg.match_index >= 0 || msg.match_stamp > msg.query_stamp) {
     // Keyframes arrive in order: a match that has not arrived is newer than the query.
     reject(msg, q, m, why_m + " although the query keyframe has: the match must be the older keyframe");
+  } else {
+    reject(msg, q, m, "no match keyframe with stamp " + stampText(msg.match_stamp) + " (keyframes are named by the "
+           "stamp of a keyframe pose message, or by their number in arrival order)");
   }
   return true;
 }
 
 void VerifierNode::wake(int64_t ns, int64_t index) {
   if (waiting_.empty()) return;
-  for (uint64_t id : waiting_.wake(ns, index)) {  // in arrival order
+  // Only the candidates whose stamp this keyframe's is within stamp_tolerance of (waitKey: stamp -
+  // tolerance), and those waiting for its number.
+  const int64_t tol = static_cast<int64_t>(std::llround(params_.stamp_tolerance * 1e9));
+  for (uint64_t id : waiting_.wake(ns, index, ns - 2 * tol)) {  // in arrival order
     std::vector<WaitKey> waits;
     if (tryDecide(waiting_.get(id), &waits)) waiting_.take(id);
     else waiting_.rewait(id, waits);
@@ -498,11 +535,14 @@ void VerifierNode::expire() {
   uint64_t id;
   while (waiting_.oldestBefore(deadline, &id)) {  // arrival order is waiting order
     const LoopCandidate msg = waiting_.take(id);
+    // A stamp that names a keyframe stamped late names it now (resolve: settled).
+    std::vector<WaitKey> ignored_waits;
+    if (tryDecide(msg, &ignored_waits, true)) continue;
     int64_t q = -1, m = -1;
     std::string why;
-    resolve(msg.query_index, msg.query_stamp, "query", &q, &why);
+    resolve(msg.query_index, msg.query_stamp, "query", &q, &why, true);
     std::string ignored;
-    resolve(msg.match_index, msg.match_stamp, "match", &m, &ignored);
+    resolve(msg.match_index, msg.match_stamp, "match", &m, &ignored, true);
     std::ostringstream s;
     s << why << " within candidate_timeout=" << params_.candidate_timeout << " s";
     reject(msg, q, m, s.str());

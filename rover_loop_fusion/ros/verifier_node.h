@@ -151,10 +151,12 @@ class VerifierNode {
   void refuseKeyframe(int64_t index, int64_t ns, const std::string& why);
   /// Decides what can be decided about a candidate: verifies or rejects it (true), or it has to
   /// wait for its query keyframe (and maybe its match): false, with what it waits for.
-  bool tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits);
-  /// A keyframe message with stamp `ns` arrived (processed or not): the previous message's
-  /// stamp is passed if this one is later (passed_stamp_ns_).
-  void passStamp(int64_t ns);
+  /// settled: the candidate waited candidate_timeout; a stamp of a keyframe stamped late names it.
+  bool tryDecide(const LoopCandidate& msg, std::vector<WaitKey>* waits, bool settled = false);
+  /// Keyframe `index`, kept with stamp `ns`, is named by it: a stamp the keyframe kept before
+  /// carries too (the clock stopped) names none of them (shared_stamps_); one an earlier keyframe
+  /// carries (stamped wrong) names the newer one from now on.
+  void nameByStamp(int64_t ns, int64_t index);
   WaitKey waitKey(int64_t index, const ros::Time& stamp) const;
   /// Re-examines the waiting candidates that a keyframe with stamp `ns` / number `index` may
   /// have resolved, in arrival order.
@@ -162,7 +164,7 @@ class VerifierNode {
   /// Rejects the candidates that waited longer than candidate_timeout.
   void expire();
   Resolution resolve(int64_t index, const ros::Time& stamp, const char* role, int64_t* found,
-                     std::string* why) const;
+                     std::string* why, bool settled = false) const;
   void verify(const LoopCandidate& msg, int64_t query, int64_t match);
   /// Adds an accepted or released loop to the node's pose graph; a refusal turns *v into an
   /// invalid_input rejection.
@@ -211,15 +213,12 @@ class VerifierNode {
   std::map<int64_t, int64_t> refused_by_stamp_;  // stamp -> index of those (stamps no graph keyframe has)
   std::deque<std::pair<int64_t, int64_t>> refused_order_;  // (index, stamp) oldest first
   RepeatedWarning refused_warning_;
-  std::set<int64_t> shared_stamps_;  // stamps several graph keyframes carry (the clock stopped)
+  std::set<int64_t> shared_stamps_;  // stamps consecutive graph keyframes carry (the clock stopped)
   bool have_keyframe_ = false;
   int64_t newest_stamp_ns_ = 0;  // newest stamp of a keyframe in the graph
-  // The stamps the keyframe stream has passed: the newest stamp of a keyframe message that a
-  // later-stamped message followed (a stamp ahead of the messages after it, one keyframe stamped
-  // late, is not passed). A candidate's stamp that names no keyframe is invalid only once passed.
-  bool have_message_ = false;
-  int64_t last_message_ns_ = 0;
-  int64_t passed_stamp_ns_ = std::numeric_limits<int64_t>::min();
+  int64_t last_kept_ns_ = 0;      // stamp of the newest keyframe in the graph
+  std::deque<std::pair<int64_t, int64_t>> recent_kept_;  // (index, stamp) of the newest keyframes in the graph
+  std::set<int64_t> stamped_late_;  // keyframes in the graph stamped after a keyframe kept after them
 
   // Candidates waiting for their keyframes (received: when the node took them from the inbox).
   WaitingCandidates<LoopCandidate> waiting_;

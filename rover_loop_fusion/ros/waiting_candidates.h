@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <stdexcept>
 #include <utility>
@@ -36,11 +37,12 @@ class WaitingCandidates {
     return id;
   }
 
-  /// Ids, in arrival order, of the candidates that wait for a keyframe with stamp <= ns or
-  /// number <= number. They stop waiting: rewait() them or take() them.
-  std::vector<uint64_t> wake(int64_t ns, int64_t number) {
+  /// Ids, in arrival order, of the candidates that wait for a keyframe with stamp key in
+  /// [from_ns, ns] or number <= number. They stop waiting: rewait() them or take() them.
+  std::vector<uint64_t> wake(int64_t ns, int64_t number,
+                             int64_t from_ns = std::numeric_limits<int64_t>::min()) {
     std::vector<uint64_t> ids;
-    collect(by_stamp_, ns, &ids);
+    collect(by_stamp_, ns, &ids, from_ns);
     collect(by_number_, number, &ids);
     std::sort(ids.begin(), ids.end());
     ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
@@ -104,8 +106,9 @@ class WaitingCandidates {
     for (auto& w : e.waits) w.first->erase(w.second);
     e.waits.clear();
   }
-  void collect(const Index& idx, int64_t up_to, std::vector<uint64_t>* ids) {
-    for (auto it = idx.begin(); it != idx.end() && it->first <= up_to; ++it) {
+  void collect(const Index& idx, int64_t up_to, std::vector<uint64_t>* ids,
+               int64_t from = std::numeric_limits<int64_t>::min()) {
+    for (auto it = idx.lower_bound(from); it != idx.end() && it->first <= up_to; ++it) {
       ++examined_;
       ids->push_back(it->second);
     }

@@ -113,23 +113,25 @@ class VerifierClient:
 
 class _Decidable:
     """Mirrors rover_verifier_node's rule: a candidate is decided as soon as its query keyframe
-    has arrived (by arrival number), a keyframe message with its query stamp has arrived, or the
-    stream has passed its query stamp (the node's passStamp: the stamp of a message that a
-    later-stamped one followed; one keyframe stamped late is not passed)."""
+    has arrived (by arrival number), or a keyframe message with its query stamp has arrived;
+    otherwise it waits (up to the node's candidate_timeout: stamps need not increase, so no stamp
+    is ever passed). A stamp of a keyframe stamped late (a later message is stamped before it) names
+    the query keyframe only once the node's wait for a keyframe carrying it in order is over."""
+
+    RECENT = 100  # the node's kRecentKept
 
     def __init__(self, tolerance):
         self.tol_us = int(round(tolerance * 1e6))
         self.count = 0
         self.stamps = []  # of the keyframe messages, sorted
-        self.last = None
-        self.passed = None
+        self.recent = collections.deque(maxlen=self.RECENT)
+        self.late = set()  # stamps of keyframe messages a later message was stamped before
 
     def keyframe(self, msg):
         self.count += 1
         k = rbag.stamp_key(msg.header.stamp)
-        if self.last is not None and k > self.last:
-            self.passed = self.last if self.passed is None else max(self.passed, self.last)
-        self.last = k
+        self.late.update(r for r in self.recent if r > k)
+        self.recent.append(k)
         bisect.insort(self.stamps, k)
 
     def __call__(self, msg):
@@ -137,9 +139,10 @@ class _Decidable:
             return msg.query_index < self.count
         k = rbag.stamp_key(msg.query_stamp)
         i = bisect.bisect_left(self.stamps, k - self.tol_us)
-        if i < len(self.stamps) and self.stamps[i] <= k + self.tol_us:
-            return True
-        return self.passed is not None and k <= self.passed + self.tol_us
+        j = bisect.bisect_right(self.stamps, k + self.tol_us)
+        if i == j:
+            return False
+        return j - i > 1 or self.stamps[i] not in self.late
 
 
 def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, final_timeout=60.0,

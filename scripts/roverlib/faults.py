@@ -3,8 +3,8 @@ rover_verifier_node: the node and rover_replay must give the same verdicts on th
 (test/ros/test_node_faults.py).
 
 A fault changes the stream of keyframe pose messages as a faulty driver or VIO would send it:
-a stamp late or early, a clock that stops, a bad or missing first keyframe, a pose that is
-not finite, a message repeated. Messages keep their arrival order (a late stamp does not make
+a stamp late or early (one, or two in a row), a clock that stops or steps back, a bad or
+missing first keyframe (or two bad ones), a pose that is not finite, a message repeated. Messages keep their arrival order (a late stamp does not make
 the message arrive late). inject() returns both forms of the faulty run:
 
   - `scenario`: for rover_replay, keyframes numbered in arrival order (what the node numbers
@@ -88,6 +88,13 @@ def shift_from(k, dx):
     return _each(k, float("inf"), edit)
 
 
+def shifted_stamps_from(k, dt):
+    """Every stamp from keyframe k on moved by dt (a clock that steps: dt < 0 goes back)."""
+    def edit(m, _):
+        m.stamp += dt
+    return _each(k, float("inf"), edit)
+
+
 def frozen_stretch(k, n):
     """Stamps of keyframes k .. k+n-1 equal to k's (a clock that stalls, then recovers)."""
     def edit(m, ref):
@@ -127,6 +134,15 @@ def quaternion(k, scale):
     return _each(k, k + 1, edit)
 
 
+def _all(*fault_list):
+    """One fault made of several, applied in order."""
+    def f(msgs):
+        for fault in fault_list:
+            msgs = fault(msgs)
+        return msgs
+    return f
+
+
 # name -> (what, the catalogue row, the fault as a function of the list of messages)
 FAULTS = {
     "late_stamp": ("keyframe 100 stamped 1000 s late", "69", late(100, 1000.0)),
@@ -134,9 +150,20 @@ FAULTS = {
     "future_stamp": ("keyframe 100 stamped 4e9 s", "36", stamp_of(100, lambda st: 4e9)),
     "out_of_order_stamp": ("keyframe 100 stamped between keyframes 97 and 98", "6",
                            stamp_of(100, lambda st: 0.5 * (st[97] + st[98]))),
+    "two_late_stamps": ("keyframes 100 and 101 stamped 1000 s late", "75", _all(late(100, 1000.0), late(101, 1000.0))),
+    "clock_step_back": ("every stamp from keyframe 200 on 500 s earlier (a clock that steps back)", "75",
+                        shifted_stamps_from(200, -500.0)),
+    "late_stamp_onto_another": ("keyframe 100 stamped 10 s late, on keyframe 120's stamp", "78",
+                                stamp_of(100, lambda st: st[120])),
     "frozen_stretch": ("every stamp from keyframe 200 on equal (a stalled clock)", "70", frozen_stretch(200, 10**9)),
+    "frozen_with_glitch": ("every stamp from keyframe 200 on equal, and keyframe 250 stamped 1000 s late", "76",
+                           _all(frozen_stretch(200, 10**9), late(250, 1000.0))),
     "repeated_keyframe": ("keyframe 100's message sent twice", "29", repeated(100)),
     "bad_first_keyframe": ("keyframe 0 at x = 5e7 m", "71", position(0, lambda x: 5e7)),
+    "two_bad_first_keyframes": ("keyframes 0 and 1 at x = 5e7 m", "77",
+                                _all(position(0, lambda x: 5e7), position(1, lambda x: 5e7 + 0.5))),
+    "two_first_keyframes_off": ("keyframes 0 and 1 50 m off", "77",
+                                _all(position(0, lambda x: x + 50.0), position(1, lambda x: x + 50.0))),
     "deleted_first_keyframe": ("keyframe 0 never sent", "71", deleted(0)),
     "huge_position": ("keyframe 100 at x + 1e30 m", "34", position(100, lambda x: x + 1e30)),
     "position_jump": ("keyframe 100 200 m off", "34", position(100, lambda x: x + 200.0)),
@@ -146,15 +173,19 @@ FAULTS = {
 }
 
 
-def inject(s, name, by_number=False):
+def inject(s, name, by_number=False, candidates_before=False):
     """The scenario s (one sequence, keyframes in order) with the fault `name` of FAULTS."""
-    return inject_all(s, name, [FAULTS[name][2]], by_number)
+    return inject_all(s, name, [FAULTS[name][2]], by_number, candidates_before)
 
 
-def inject_all(s, name, fault_list, by_number=False):
+def inject_all(s, name, fault_list, by_number=False, candidates_before=False, repeats=None):
     """The scenario s with every fault of fault_list (functions of the list of messages: the
     makers above, late(), frozen_stretch(), burst(), ...), applied in order; `name` names the
-    faulty run."""
+    faulty run. candidates_before: each candidate message arrives CANDIDATE_DELAY before its
+    query keyframe's message instead of after it (the node holds it until the keyframe comes).
+    repeats: (first, last, times): the candidates whose query keyframe is in first .. last-1
+    (clean indices) are sent `times` times each, one right after the other (a host that
+    re-detects a loop, a bag played twice, a driver that retransmits), in both forms."""
     from . import scenario as rscenario
     msgs = [KeyframeMessage(k.index, k.stamp, k.T, k.stamp) for k in s.keyframes]
     for fault in fault_list:
@@ -181,14 +212,20 @@ def inject_all(s, name, fault_list, by_number=False):
             return number[i]
         return len(msgs) + missing.index(i)
 
+    def copies(c):
+        if repeats and repeats[0] <= c.query < repeats[1]:
+            return repeats[2]
+        return 1
+
+    sent_candidates = [c for c in s.candidates for _ in range(copies(c))]
     cands = []
-    for c in s.candidates:
+    for c in sent_candidates:
         c2 = copy.copy(c)
         c2.query, c2.match = renumber(c.query), renumber(c.match)
         cands.append(c2)
     out = rscenario.Scenario(f"{s.name}+{name}", kfs, cands,
                              [truth[m.index] for m in msgs] if truth else None, dict(s.meta))
-    yaws = [c.relative_yaw(clean[c.match].T) for c in s.candidates]
+    yaws = [c.relative_yaw(clean[c.match].T) for c in sent_candidates]
 
     # the node: keyframe messages at their arrival time, candidates after their query keyframe
     sent = {}
@@ -200,16 +237,17 @@ def inject_all(s, name, fault_list, by_number=False):
             o.x, o.y, o.z, o.w = (v * m.quaternion_scale for v in (o.x, o.y, o.z, o.w))
         messages.append((m.arrival, rbag.KEYFRAME_TOPIC, msg))
         sent.setdefault(m.index, m)
-    for c, yaw in zip(s.candidates, yaws):
+    delay = -rbag.CANDIDATE_DELAY if candidates_before else rbag.CANDIDATE_DELAY
+    for c, yaw in zip(sent_candidates, yaws):
         q, mt = sent.get(c.query), sent.get(c.match)
         q_stamp = q.stamp if q else clean[c.query].stamp
         m_stamp = mt.stamp if mt else clean[c.match].stamp
         qi, mi = (renumber(c.query), renumber(c.match)) if by_number else (-1, -1)
-        arrival = (q.arrival if q else clean[c.query].stamp) + rbag.CANDIDATE_DELAY
+        arrival = (q.arrival if q else clean[c.query].stamp) + delay
         messages.append((arrival, rbag.CANDIDATE_TOPIC,
                          rbag.candidate_msg(q_stamp, m_stamp, c.T_rel, yaw, c.inliers,
                                             qi, mi)))
-    messages.sort(key=lambda e: e[0])
+    messages.sort(key=lambda e: e[0])  # (stable: the copies of a candidate one after the other)
     return Faulted(name, out, messages, rows, yaws)
 
 

@@ -210,6 +210,11 @@ TEST(ParameterFiles, TheReaderIsStrictAndSaysWhere) {
   refused("function_tolerance: 1e-4\n", "text to YAML 1.1");  // ROS would read a string
   refused("function_tolerance: 0.5\n", "function_tolerance must be");
   refused("odometry_neighbours: 4.0\n", "must be an integer");
+  // Issue 45 item 8: the real bound and the value as written, so that the refusal says why
+  // (before: "must be a number in [0.5, 1] (got 1)", "must be an integer in [1, 100000] (got 60)").
+  refused("gate_probability: 1.0\n", "gate_probability must be a number in [0.5, 0.999999999999] (got 1.0)");
+  refused("revisit_window: 60.0\n", "must be an integer in [1, 100000] (got 60.0, not an integer");
+  refused("global_window: 1.0e+7\n", "must be an integer in [1, 10000000] (got 1.0e+7, not an integer");
   refused("robust_candidate: yes\n", "must be true or false");
   refused("threshold:\n  nested: 0.2\n", "p.yaml:1: threshold has no value");
   refused("threshold: 0.2\n  max_iterations: 3\n", "p.yaml:2: indented");

@@ -28,7 +28,7 @@ struct Outcome {
 
 /// rover_replay's sequential protocol on a scenario, with one keyframe changed by `edit`.
 template <class Edit>
-Outcome replay(const std::string& scenario, int64_t edited_index, Edit edit) {
+Outcome replay(const std::string& scenario, int64_t edited_index, Edit edit, bool every = false) {
   sim::Scenario s;
   std::string error;
   EXPECT_TRUE(sim::loadScenario(scenario, &s, &error)) << error;
@@ -36,7 +36,7 @@ Outcome replay(const std::string& scenario, int64_t edited_index, Edit edit) {
   Outcome o;
   size_t next = 0;
   for (sim::ScenarioKeyframe k : s.keyframes) {
-    if (k.index == edited_index) edit(&k);
+    if (every || k.index == edited_index) edit(&k);
     const Status st = v.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
     if (!st.ok) {
       ++o.refused;
@@ -52,6 +52,12 @@ Outcome replay(const std::string& scenario, int64_t edited_index, Edit edit) {
     }
   }
   return o;
+}
+
+/// rover_replay's sequential protocol on a scenario, with every keyframe passed through `edit`.
+template <class Edit>
+Outcome replayEdited(const std::string& scenario, Edit edit) {
+  return replay(scenario, -2, edit, true);
 }
 
 /// A keyframe of the shipped corridor that no candidate names, after the first loops.
@@ -213,6 +219,69 @@ TEST(StampJump, OneKeyframeStampedLateCostsNoKeyframe) {
   EXPECT_FALSE(v.addKeyframe(103, 105.0, 1, Eigen::Vector3d(51.5, 0, 0), kI).ok);
 }
 
+TEST(StampJump, TwoKeyframesStampedLateInARowCostNoKeyframe) {
+  // Issue 45 item 4: keyframes 100 and 101 of the corridor stamped 1000 s late. The keyframe
+  // after them, stamped before both, was "out of order" until 3 keyframes confirmed a new
+  // clock (2 refused). Now it says that both stamps were wrong, and nothing is refused.
+  const Outcome clean = replay(kCorridor, -1, [](sim::ScenarioKeyframe*) {});
+  const Outcome o = replayEdited(kCorridor, [](sim::ScenarioKeyframe* kf) {
+    if (kf->index == 100 || kf->index == 101) kf->stamp += 1000.0;
+  });
+  EXPECT_EQ(o.refused, 0) << (o.refusals.empty() ? "" : o.refusals[0]);
+  EXPECT_EQ(o.tp, clean.tp);
+  EXPECT_EQ(o.fp, 0);
+  Verifier v;
+  fill(v, 100);
+  ASSERT_TRUE(v.addKeyframe(100, 110.0 + 1000.0, 1, Eigen::Vector3d(50.0, 0, 0), kI).ok);
+  ASSERT_TRUE(v.addKeyframe(101, 111.0 + 1000.0, 1, Eigen::Vector3d(50.5, 0, 0), kI).ok);
+  const Status next = v.addKeyframe(102, 112.0, 1, Eigen::Vector3d(51.0, 0, 0), kI);
+  ASSERT_TRUE(next.ok) << next.message;
+  EXPECT_NE(next.message.find("keyframes 100 .. 101's stamps were wrong"), std::string::npos) << next.message;
+  EXPECT_TRUE(v.addKeyframe(103, 113.0, 1, Eigen::Vector3d(51.5, 0, 0), kI).ok);
+  // A stamp between two earlier keyframes' is its own fault, not two late stamps: refused.
+  Verifier u;
+  fill(u, 100);
+  EXPECT_FALSE(u.addKeyframe(100, 107.5, 1, Eigen::Vector3d(50.0, 0, 0), kI).ok);
+  // As many late keyframes in a row as confirm a new clock are one: coming back from it is a
+  // step back, confirmed the same way.
+  Verifier w;
+  fill(w, 100);
+  for (int k = 100; k < 103; ++k)
+    ASSERT_TRUE(w.addKeyframe(k, 10.0 + k + 1000.0, 1, Eigen::Vector3d(0.5 * k, 0, 0), kI).ok);
+  EXPECT_FALSE(w.addKeyframe(103, 113.0, 1, Eigen::Vector3d(51.5, 0, 0), kI).ok);
+}
+
+TEST(StampJump, AGlitchOnAStoppedClockCostsNoKeyframe) {
+  // Issue 45 item 5: stamps frozen from keyframe 200 of the corridor and keyframe 250 stamped
+  // 1000 s late: the keyframes after it carry the frozen stamp, which is not after 250's, and
+  // equal stamps never confirm a new clock: 109 keyframes refused, 12 of 31 true loops. Now the
+  // keyframe after the glitch, stamped as the stopped clock reads, says 250's stamp was wrong.
+  const Outcome clean = replay(kCorridor, -1, [](sim::ScenarioKeyframe*) {});
+  double frozen = -1.0;
+  const Outcome o = replayEdited(kCorridor, [&](sim::ScenarioKeyframe* kf) {
+    if (kf->index == 200) frozen = kf->stamp;
+    if (kf->index >= 200) kf->stamp = frozen;
+    if (kf->index == 250) kf->stamp += 1000.0;
+  });
+  EXPECT_EQ(o.refused, 0) << (o.refusals.empty() ? "" : o.refusals[0]);
+  EXPECT_EQ(o.tp, clean.tp);
+  EXPECT_EQ(o.fp, 0);
+  Verifier v;
+  fill(v, 100);
+  ASSERT_TRUE(v.addKeyframe(100, 109.0, 1, Eigen::Vector3d(50.0, 0, 0), kI).warning());  // the clock stopped
+  ASSERT_TRUE(v.addKeyframe(101, 109.0 + 1000.0, 1, Eigen::Vector3d(50.5, 0, 0), kI).ok);
+  const Status next = v.addKeyframe(102, 109.0, 1, Eigen::Vector3d(51.0, 0, 0), kI);
+  ASSERT_TRUE(next.ok) << next.message;
+  EXPECT_NE(next.message.find("keyframe 101's stamp was wrong"), std::string::npos) << next.message;
+  const Status after = v.addKeyframe(103, 109.0, 1, Eigen::Vector3d(51.5, 0, 0), kI);
+  EXPECT_TRUE(after.ok && !after.warning()) << after.message;  // still the same stopped stretch
+  // A repeat of the keyframe before the glitch is still a repeat.
+  Verifier w;
+  fill(w, 100);
+  ASSERT_TRUE(w.addKeyframe(100, 109.0 + 1000.0, 1, Eigen::Vector3d(50.0, 0, 0), kI).ok);
+  EXPECT_FALSE(w.addKeyframe(101, 109.0, 1, Eigen::Vector3d(49.5, 0, 0), kI).ok);
+}
+
 TEST(StampJump, AClockThatStopsIsKeptAndARepeatedMessageIsNot) {
   // Issue 22 item 2: every stamp from keyframe 200 on equal (a stalled driver) refused every
   // keyframe after it: 160 of the corridor's, recall 0.16. A pose that moves plausibly keeps
@@ -291,6 +360,39 @@ TEST(KeyframeJump, ABadFirstKeyframeIsOutvotedNotTakenAsTheReference) {
   EXPECT_NE(reloc.message.find("new segment"), std::string::npos) << reloc.message;
   const Verdict across = w.verify(loop(12, 0, 1.0));
   EXPECT_EQ(across.reason, Reason::kNoTrajectoryPrior) << across.detail;
+}
+
+TEST(KeyframeJump, TwoBadFirstKeyframesThatAgreeAreOutvoted) {
+  // Issue 45 item 6: keyframes 0 and 1 both bad (at 5e7 m, or 50 m off) and agreeing with each
+  // other were not discredited: keyframes 2-3 refused, keyframe 4 started a "relocation" and
+  // loops into 0 or 1 were held without a prior. The many keyframes after them agree with
+  // each other: fewer first keyframes than the run that contradicts them are discredited.
+  for (const double offset : {5e7, 50.0}) {
+    Verifier v;
+    ASSERT_TRUE(v.addKeyframe(0, 10.0, 1, Eigen::Vector3d(offset, 0, 0), kI).ok);
+    ASSERT_TRUE(v.addKeyframe(1, 11.0, 1, Eigen::Vector3d(offset + 0.5, 0, 0), kI).ok);
+    EXPECT_FALSE(v.addKeyframe(2, 12.0, 1, Eigen::Vector3d(1.0, 0, 0), kI).ok);
+    EXPECT_FALSE(v.addKeyframe(3, 13.0, 1, Eigen::Vector3d(1.5, 0, 0), kI).ok);
+    const Status third = v.addKeyframe(4, 14.0, 1, Eigen::Vector3d(2.0, 0, 0), kI);
+    ASSERT_TRUE(third.ok) << third.message;
+    EXPECT_NE(third.message.find("keyframes 0 .. 1, the first of sequence 1, are discredited"), std::string::npos)
+        << third.message;
+    for (int k = 5; k < 120; ++k) ASSERT_TRUE(v.addKeyframe(k, 10.0 + k, 1, Eigen::Vector3d(0.5 * k, 0, 0), kI).ok);
+    for (const int64_t bad : {0, 1}) {
+      const Verdict into = v.verify(loop(100, bad));
+      EXPECT_EQ(into.reason, Reason::kInvalidInput) << offset << ": " << into.detail;
+      EXPECT_NE(into.detail.find("discredited"), std::string::npos) << into.detail;
+    }
+    const Verdict within = v.verify(loop(110, 100, 5.0));
+    EXPECT_NE(within.reason, Reason::kNoTrajectoryPrior) << within.detail;
+  }
+  // As many first keyframes as the run are not outvoted: the later run is a relocation.
+  Verifier w;
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(w.addKeyframe(k, 10.0 + k, 1, Eigen::Vector3d(50.0 + 0.5 * k, 0, 0), kI).ok);
+  EXPECT_FALSE(w.addKeyframe(3, 13.0, 1, Eigen::Vector3d(1.5, 0, 0), kI).ok);
+  EXPECT_FALSE(w.addKeyframe(4, 14.0, 1, Eigen::Vector3d(2.0, 0, 0), kI).ok);
+  const Status reloc = w.addKeyframe(5, 15.0, 1, Eigen::Vector3d(2.5, 0, 0), kI);
+  EXPECT_NE(reloc.message.find("new segment"), std::string::npos) << reloc.message;
 }
 
 TEST(LoadedMap, KeyframesSavedOutOfTimeOrderAreKeptWithOneWarning) {

@@ -334,6 +334,36 @@ class NodeHardening(unittest.TestCase):
                 finally:
                     node.stop()
 
+    def test_a_relative_verdict_log_is_resolved_and_said_and_has_its_header_without_verdicts(self):
+        # Issue 45 item 8: a relative ~verdict_log was written to the node's working directory
+        # (roslaunch: ~/.ros) without a word, and a run without verdicts left a 0-byte file.
+        with tempfile.TemporaryDirectory() as d:
+            here = os.getcwd()
+            os.chdir(d)
+            try:
+                node = Node("relative_log", {"verdict_log": "verdicts.csv"})
+            finally:
+                os.chdir(here)
+            path = os.path.join(os.path.realpath(d), "verdicts.csv")
+            try:
+                self.assertTrue(wait_until(lambda: "is a relative path" in node.output()), node.output())
+                self.assertIn(f"'verdicts.csv' is a relative path: the verdict log is {path}", node.output())
+            finally:
+                node.stop()
+            with open(path) as f:
+                text = f.read()
+            self.assertTrue(text.startswith("query_stamp,match_stamp,query_index,match_index"), text)
+            self.assertEqual(text.count("\n"), 1, "the header, no verdict")
+
+    def test_an_integer_parameter_given_as_a_float_says_so(self):
+        # Issue 45 item 8: the value as given, so that the message says why it is refused.
+        node = Node("float_queue", {"queue_size": 5000.0}, wait=False)
+        try:
+            self.assertEqual(node.wait_exit(60.0), 1, node.output())
+            self.assertIn("/float_queue/queue_size must be an integer (got 5000.0, not an integer", node.output())
+        finally:
+            node.stop()
+
     def test_unknown_keys_in_the_node_namespace_are_reported(self):
         node = Node("typo", {"candidate_timout": 5.0, "rovr/threshold": 0.3})
         try:

@@ -140,6 +140,27 @@ TEST(VerdictLog, ARowTheDiskCannotHoldIsCutBackAndCounted) {
   std::remove(path.c_str());
 }
 
+TEST(VerdictLog, ALogWithoutVerdictsHasItsHeader) {
+  // Issue 45 item 8: a run without verdicts left a 0-byte file, which evaluate.py refuses as
+  // "not a verdict log". The header is written as soon as the file is open.
+  const std::string path = tempPath("no_verdicts.csv");
+  std::remove(path.c_str());
+  {
+    VerdictLog log;
+    std::string error;
+    ASSERT_TRUE(log.open(path, kHeader, &error)) << error;
+    EXPECT_EQ(log.flush(2.0), 0u);
+  }
+  EXPECT_EQ(readAll(path), std::string(kHeader) + "\n");
+  {
+    VerdictLog again;  // an existing log is appended to: no second header
+    std::string error;
+    ASSERT_TRUE(again.open(path, kHeader, &error)) << error;
+  }
+  EXPECT_EQ(readAll(path), std::string(kHeader) + "\n");
+  std::remove(path.c_str());
+}
+
 TEST(VerdictLog, TheHeaderComesFirstWhenTheDiskIsFullAtStart) {
   // Before: the header was tried once; rows written after space freed went into a file without
   // it, which evaluate.py refuses ("not a verdict log").
