@@ -664,7 +664,7 @@ TEST(RevisitRule, ARevisitsLaterLoopsAreJudgedByItsAcceptedLoopsNotByTheDriftedE
 TEST(RevisitRule, AnExtensionDoesNotTeachTheDriftCalibration) {
   // An extension is a loop the prior rejected: its innovation is the drift the model ruled out
   // (or a false row's offset), not a sample of the model's scale. Only loops the prior
-  // confirmed teach it (issue 19: a false row set the scale in the probe). With calibrate_drift
+  // confirmed teach it (a false row set the scale in the probe). With calibrate_drift
   // on, the scale is fitted once five loops have taught it: here, where extensions come between
   // the steady-drift revisit's loops accepted alone, it must first move at the fifth loop
   // accepted alone, not earlier.

@@ -21,7 +21,10 @@ HISTORY = {"CHANGELOG.md"}
 SKIP_DIRS = {".git", ".ws", ".venv", "results", "__pycache__", "node_modules"}
 MAX_LINES = {"README.md": 200, os.path.join("docs", "results.md"): 500}
 # The pages a user reads: they cite no commit (design-notes.md, a developer's record, may).
-USER_PAGES = ["README.md", os.path.join("docs", "results.md"), os.path.join("docs", "method.md")]
+USER_PAGES = ["README.md", os.path.join("docs", "results.md"), os.path.join("docs", "method.md"),
+              os.path.join("docs", "vins-fusion.md"), os.path.join("docs", "results", "targets.md"),
+              os.path.join("docs", "results", "posegraph.md"), os.path.join("patches", "README.md"),
+              os.path.join("data", "README.md")]
 HASH = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
 # VINS-Fusion's commit that the patch applies to (patches/README.md): a user needs it.
 UPSTREAM = {"be55a93"}
@@ -92,7 +95,8 @@ def test_no_step_of_the_work_is_named_outside_the_changelog():
 
 
 def test_the_pages_keep_their_budgets():
-    assert not over_budget(repo_files(ROOT))
+    found = over_budget(repo_files(ROOT))
+    assert not found, "a page over its line budget:\n" + "\n".join(found)
 
 
 def test_the_user_pages_cite_no_commit():

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """rover_verifier_node and rover_replay on every stamp and keyframe fault of
-docs/failure-catalogue.md (issue 22: one stamp policy, in one place): the shipped corridor with
+docs/failure-catalogue.md (one stamp policy, in one place): the shipped corridor with
 one fault each (roverlib.faults: a late stamp, a future stamp, a stopped clock, a repeated or
 deleted message, a bad first pose, a NaN or huge pose, a jump, a relocation), replayed into a
 node started by the test and through rover_replay. Both must give the same verdicts, candidate
@@ -23,13 +23,13 @@ from roverlib import bag, bag_replay, faults, scenario  # noqa: E402
 PKG = "rover_loop_fusion"
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BY_NUMBER = {"frozen_stretch"}
-# Stamp faults that must cost no true loop (issue 22 items 1, 2: a late stamp cost 3 true loops
+# Stamp faults that must cost no true loop (a late stamp cost 3 true loops
 # in the node, a stopped clock 26 of 31).
 NO_LOSS = {"late_stamp", "frozen_stretch", "repeated_keyframe"}
 # Faults after which look-alikes get in (failure catalogue rows 35, 71): without keyframe 0 the
 # lap's first true loop (into keyframe 0) is lost and a look-alike 1 m away is the first loop
 # after 240 m (2 false); a relocation's released group of look-alikes (8 false). Named limits of
-# the decision (issue 19), not of keyframe intake: every other fault lets no false loop in.
+# the decision, not of keyframe intake: every other fault lets no false loop in.
 LOOKALIKES_IN = {"bad_first_keyframe", "deleted_first_keyframe", "relocation"}
 
 
