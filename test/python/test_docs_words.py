@@ -18,7 +18,8 @@ STEP_WORDS = [
     re.compile(r"\bthe\s+lab\b", re.I),               # a workbench, not a place a reader can go
 ]
 HISTORY = {"CHANGELOG.md"}
-SKIP_DIRS = {".git", ".ws", ".venv", "results", "__pycache__", "node_modules"}
+SKIP_DIRS = {".git", ".ws", ".venv", "__pycache__", "node_modules"}
+SKIP_TOP = {"results"}  # the benchmarks' git-ignored output (docs/results/ is a page folder)
 MAX_LINES = {"README.md": 200, os.path.join("docs", "results.md"): 500}
 # The pages a user reads: they cite no commit (design-notes.md, a developer's record, may).
 USER_PAGES = ["README.md", os.path.join("docs", "results.md"), os.path.join("docs", "method.md"),
@@ -40,7 +41,7 @@ def repo_files(root):
     except (OSError, subprocess.CalledProcessError):
         paths = []
         for d, dirs, files in os.walk(root):
-            dirs[:] = [x for x in dirs if x not in SKIP_DIRS]
+            dirs[:] = [x for x in dirs if x not in SKIP_DIRS and not (d == root and x in SKIP_TOP)]
             paths += [os.path.relpath(os.path.join(d, f), root) for f in files]
     texts = []
     for p in sorted(set(paths)):
