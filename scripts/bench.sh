@@ -12,7 +12,7 @@
 #                                             compared, summed verify_ms side by side (scripts/bench/cost_ab.py)
 #   ./scripts/bench.sh robustness [--split test|tuning] [--set K=V]  the +-10 % threshold and gate
 #                                             settings per case, recall spread (scripts/bench/robustness.py)
-#   ./scripts/bench.sh targets [--poc DIR ...]  issue 19's targets per case from the runs above, beside
+#   ./scripts/bench.sh targets [--poc DIR ...]  the project's targets per case from the runs above, beside
 #                                             the peers, with the causes of each miss (scripts/bench/targets.py)
 #   ./scripts/bench.sh sweep ...              scripts/threshold_sweep.py (tuning cases only)
 #   ./scripts/bench.sh evaluate ...           scripts/evaluate.py (verdict log + labels -> AP, MR, ...)

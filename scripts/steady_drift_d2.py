@@ -9,7 +9,7 @@ the true loops' median d2 and the share of true and false candidates within the 
 (4 dof).
 
 A diagnostic of the trajectory prior, not of the verifier: the verifier's own covariance also
-runs through accepted loops (docs/results.md, "Stop 37").
+runs through accepted loops (docs/results.md, "Steady drift").
 
     scripts/steady_drift_d2.py [--split tuning|test] [--yaw-rate-sigma 0.2] [--scale-sigma 0.02]
                                [--gate 0.999] [cases ...]      (default: every simulated case)

@@ -314,7 +314,7 @@ class RevisitRule : public MetricRule {
     b.precision(3);
     b << std::fixed << "(max of threshold and " << cfg_.revisit.revisit_score_sigmas << " x std " << sigma << " m";
     if (!(score <= bound) && cfg_.revisit.revisit_observed_drift) {
-      // The drift model's std may be the VIO's or not; the accepted loops tell (the lab's third
+      // The drift model's std may be the VIO's or not; the accepted loops tell (a recorded run's third
       // lap: 0.226 m against 0.65 x 0.138 m, docs/vins-fusion.md). Only where the prior tells
       // the place from a look-alike a known spacing away: a row of look-alikes fits as well as
       // a third lap by score and d2 (warehouse_s0.1: 0.24 m, d2 7-11; docs/design-notes.md).

@@ -301,7 +301,7 @@ void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind k
   h.d2 = d2;
   held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
   // A revisit hypothesis is judged on keyframe arrival (addKeyframe), not here: its joint trial
-  // (all its loops) would otherwise land on this verify()'s time (issue 20).
+  // (all its loops) would otherwise land on this verify()'s time (the cost of verify(), docs/results.md).
   if (kind != HoldKind::kRevisit) settle(false);
 }
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Agreement of the bounded (condensed) trial with the full-window trial (issue 13): on every
+"""Agreement of the bounded (condensed) trial with the full-window trial: on every
 benchmark family, does ROVER decide each candidate the same way with condense_min_window N as
 with the full Ceres trial over [match, newest]?
 

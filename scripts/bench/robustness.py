@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Robustness of ROVER's decisions to its two main parameters (issue 19's target: moving the
+"""Robustness of ROVER's decisions to its two main parameters (the target: moving the
 score threshold or the gate by +-10 % changes no case's recall by more than 0.05).
 
 Every case of the split (the family's own scenario: same candidates and order as the family
@@ -254,7 +254,7 @@ def main(argv=None):
     ap.add_argument("--settings", default=",".join(SETTINGS), help=f"a subset of {','.join(SETTINGS)}")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a verifier parameter for every run (after the setting's), e.g. global_check=true")
-    ap.add_argument("--spread", type=float, default=0.05, help="recall spread listed per case (issue 19: 0.05)")
+    ap.add_argument("--spread", type=float, default=0.05, help="recall spread listed per case (target: 0.05)")
     ap.add_argument("--out", default=os.path.join(bench.RESULTS, "robustness"))
     ap.add_argument("--jobs", type=int, default=2)
     a = ap.parse_args(argv)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 19's targets, case by case: what the family benchmarks and the robustness sweep left
+"""The project's targets, case by case: what the family benchmarks and the robustness sweep left
 behind, read back (no new runs), each case beside the peers' figures for the same case, every
 miss with what lost its true loops and what let its false ones in.
 
@@ -13,7 +13,7 @@ order), runs/<case>/rover/verdicts.csv and scenarios/<case>/candidates.csv (ROVE
 the labels: the causes). --robustness: what `./scripts/bench.sh robustness` wrote (results.csv:
 the recall of each case per setting; default results/robustness; without it no spread).
 
-The targets (issue 19), as this script checks them:
+The targets, as this script checks them:
   precision, family   pooled P >= 0.99
   precision, case     P >= 0.98, or nothing accepted (P "-"); "exempt" where every peer is below
                       0.9 (a peer that accepts nothing counts as below)

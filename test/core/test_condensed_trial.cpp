@@ -1,4 +1,4 @@
-// The condensed trial (condense_min_window, issue 13): on a scene with long spans (laps; a
+// The condensed trial (condense_min_window): on a scene with long spans (laps; a
 // revisit's match can lie several laps back), a verifier whose trials run on the condensed graph
 // decides every candidate as the full-window (Ceres) trial does, with nearly the same score.
 // Both verifiers see the same keyframes and commit the same loops (the true ones they accept,

@@ -1,4 +1,4 @@
-// Faults a red team found in the core (issue 14), each reproduced and pinned: one implausible
+// Faults a red team found in the core, each reproduced and pinned: one implausible
 // keyframe (a huge but finite position, a stamp far in the future) must cost one keyframe, not
 // the session; a real relocation or clock jump is accepted after confirmation; a loaded map
 // saved out of time order keeps its keyframes; the relative yaw is checked as it is used.
@@ -198,7 +198,7 @@ TEST(StampJump, ANewClockIsAcceptedAfterConfirmations) {
 }
 
 TEST(StampJump, OneKeyframeStampedLateCostsNoKeyframe) {
-  // Issue 22 item 1: keyframe 100 of the corridor stamped 1000 s late (within max_stamp_jump,
+  // Keyframe 100 of the corridor stamped 1000 s late (within max_stamp_jump,
   // so it is taken): the keyframes after it were "out of order" until 3 confirmed a new clock
   // (2 refused, loops into them invalid). Now the next keyframe, stamped after keyframe 99's,
   // says keyframe 100's stamp was the wrong one and nothing is refused.
@@ -283,7 +283,7 @@ TEST(StampJump, AGlitchOnAStoppedClockCostsNoKeyframe) {
 }
 
 TEST(StampJump, AClockThatStopsIsKeptAndARepeatedMessageIsNot) {
-  // Issue 22 item 2: every stamp from keyframe 200 on equal (a stalled driver) refused every
+  // Every stamp from keyframe 200 on equal (a stalled driver) refused every
   // keyframe after it: 160 of the corridor's, recall 0.16. A pose that moves plausibly keeps
   // its keyframe (one warning for the stretch); the same stamp and the same pose is a repeat.
   const Outcome clean = replay(kCorridor, -1, [](sim::ScenarioKeyframe*) {});
@@ -328,7 +328,7 @@ TEST(StampJump, AClockThatStopsIsKeptAndARepeatedMessageIsNot) {
 }
 
 TEST(KeyframeJump, ABadFirstKeyframeIsOutvotedNotTakenAsTheReference) {
-  // Issue 22 item 7: keyframe 0 at x = 5e7 m became the session's reference: the keyframes
+  // Keyframe 0 at x = 5e7 m became the session's reference: the keyframes
   // after it were refused, then taken as a relocation, and loops into keyframe 0 were held as
   // "no trajectory prior". Now the run that agrees with itself discredits the lone first pose:
   // loops that name it are invalid input.

@@ -37,7 +37,7 @@ sim::LapsOptions drifting() {
   return o;
 }
 
-/// A VIO that drifts steadily, as the lab's bags (docs/vins-fusion.md): each odometry step
+/// A VIO that drifts steadily, as the recorded VINS-Fusion runs (docs/vins-fusion.md): each odometry step
 /// turned by yaw_deg_per_m and stretched by scale.
 void steadyDrift(sim::Scene* s, double step_m, double yaw_deg_per_m, double scale) {
   std::vector<core::Pose> vio;
@@ -424,7 +424,7 @@ TEST(RevisitRule, AHypothesisIsJudgedOnKeyframeArrivalNotInsideAVerificationThat
 }
 
 TEST(RevisitRule, ALoopOfTheSameQueriesWhoseMatchIsALapAwayDoesNotContradictAHypothesis) {
-  // Found inside loop_fusion (docs/vins-fusion.md, stop 35): lap 2's last loops match the end of
+  // Found inside loop_fusion (docs/vins-fusion.md, "A third lap"): lap 2's last loops match the end of
   // lap 1, lap 3's first loops its start. Between those matches the VIO odometry is a whole lap,
   // whose drift the model underrates, so the cycle test of a lap-3 member with a lap-2 loop
   // failed and the lap-3 hypothesis was dropped as contradicting accepted loops. Here: three
@@ -434,7 +434,7 @@ TEST(RevisitRule, ALoopOfTheSameQueriesWhoseMatchIsALapAwayDoesNotContradictAHyp
   o.laps = 3;
   o.true_every = 2;
   sim::Scene s = sim::makeLapsScene(o);
-  // A VIO whose yaw drifts steadily (0.04 deg/m; the lab's bags 0.2 on a lap of 44 m), beyond
+  // A VIO whose yaw drifts steadily (0.04 deg/m; the recorded runs 0.2 on a lap of 44 m), beyond
   // the drift model's random walk over a lap.
   steadyDrift(&s, o.step, 0.04, 1.0);
   const int64_t per_lap = static_cast<int64_t>(std::lround(2.0 * (o.width + o.height) / o.step));
@@ -442,7 +442,7 @@ TEST(RevisitRule, ALoopOfTheSameQueriesWhoseMatchIsALapAwayDoesNotContradictAHyp
   cfg.revisit.revisit_reject_probability = 1.0 - 1e-12;
   cfg.metric.threshold = 0.01;
   cfg.metric.max_innovation = 0.0;
-  cfg.chi2.gate_probability = 0.9;  // the cycle test stricter: the lap-long legs fail it, as in the lab
+  cfg.chi2.gate_probability = 0.9;  // the cycle test stricter: the lap-long legs fail it, as in the recorded runs
   Verifier v(cfg);
   std::vector<core::LoopCandidate> lap2, lap3;
   for (const sim::SimCandidate& c : s.candidates) {
@@ -506,7 +506,7 @@ sim::Scene steadyLaps(sim::LapsOptions o, double yaw_deg_per_m, double scale, in
   return s;
 }
 
-/// Three laps of a VIO that drifts steadily (0.215 deg/m, scale 1.02, as the lab's bags), every
+/// Three laps of a VIO that drifts steadily (0.215 deg/m, scale 1.02, as the recorded runs), every
 /// true candidate matched to lap 1 (as loop_fusion's detector matched lap 3 there).
 sim::Scene steadilyDriftingLaps(int64_t* per_lap) {
   sim::LapsOptions o = drifting();
@@ -528,7 +528,7 @@ bool anyDetail(const Outcome& r, const std::string& text) {
 }  // namespace
 
 TEST(RevisitRule, AThirdLapIsJudgedInUnitsOfTheDriftTheAcceptedLoopsShow) {
-  // Found inside loop_fusion (docs/vins-fusion.md, stop 36): after a steady yaw drift and a
+  // Found inside loop_fusion (docs/vins-fusion.md, "A third lap closed"): after a steady yaw drift and a
   // stretched scale, lap 3's first loops bend the trajectory a little more than
   // max(threshold, revisit_score_sigmas x the model's std), no lap-3 loop passes alone, and
   // lap 3 never closed. The loops accepted on lap 2 show a drift far beyond the model's.
@@ -541,7 +541,7 @@ TEST(RevisitRule, AThirdLapIsJudgedInUnitsOfTheDriftTheAcceptedLoopsShow) {
   off.revisit.revisit_observed_drift = false;
   const Outcome with = run(on, s), without = run(off, s);
   ASSERT_GE(lap3, 100);
-  ASSERT_LT(acceptedFrom(without, 2 * per_lap), lap3 / 10) << "the scene must lose lap 3 as the lab did";
+  ASSERT_LT(acceptedFrom(without, 2 * per_lap), lap3 / 10) << "the scene must lose lap 3 as the recorded run did";
   EXPECT_TRUE(anyDetail(without, "bound 0.200 m (max of threshold and 0.650 x std")) << "lost to the joint trial's bound";
   EXPECT_GE(acceptedFrom(with, 2 * per_lap), lap3 * 9 / 10);
   EXPECT_TRUE(anyDetail(with, "the drift scale the accepted loops show")) << "released in units of the observed drift";
@@ -642,7 +642,7 @@ int accepted(const std::vector<Verdict>& vs, const std::string& text = "") {
 }  // namespace
 
 TEST(RevisitRule, ARevisitsLaterLoopsAreJudgedByItsAcceptedLoopsNotByTheDriftedEstimate) {
-  // The simulated steady-drift scenes (docs/results.md, stop 38): lap 2's first loops are
+  // The simulated steady-drift scenes (docs/results.md, "Steady drift"): lap 2's first loops are
   // accepted, but the estimate keeps most of the yaw that the loops' weakly weighted yaw does
   // not correct, and the next true loops fail the innovation gate against it. Their cycles
   // through the accepted loops along the short odometry legs close: they extend the revisit.
@@ -664,7 +664,7 @@ TEST(RevisitRule, ARevisitsLaterLoopsAreJudgedByItsAcceptedLoopsNotByTheDriftedE
 TEST(RevisitRule, AnExtensionDoesNotTeachTheDriftCalibration) {
   // An extension is a loop the prior rejected: its innovation is the drift the model ruled out
   // (or a false row's offset), not a sample of the model's scale. Only loops the prior
-  // confirmed teach it (issue 19: a false row set the scale in the probe). With calibrate_drift
+  // confirmed teach it (a false row set the scale in the probe). With calibrate_drift
   // on, the scale is fitted once five loops have taught it: here, where extensions come between
   // the steady-drift revisit's loops accepted alone, it must first move at the fifth loop
   // accepted alone, not earlier.

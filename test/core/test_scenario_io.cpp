@@ -79,7 +79,7 @@ TEST(ScenarioIo, MalformedInputSaysWhereAndWhat) {
 }
 
 TEST(ScenarioIo, RefusesInliersOutOfRangeAndBadGroundTruthSayingWhere) {
-  // Issue 22 item 8: inliers 99999999999 silently became -1; ground truth with NaN or a second
+  // Inliers 99999999999 silently became -1; ground truth with NaN or a second
   // pose for a keyframe was accepted (evaluate.py then failed: "SVD did not converge").
   const std::string header = "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label\n";
   std::vector<ScenarioCandidate> c;
@@ -109,7 +109,7 @@ TEST(ScenarioIo, RefusesInliersOutOfRangeAndBadGroundTruthSayingWhere) {
 }
 
 TEST(ScenarioIo, AVeryLongLineIsRefusedAsSuch) {
-  // Issue 22 item 8: a single 60 MB line cost rover_replay 417 MB before the error (whole files
+  // A single 60 MB line cost rover_replay 417 MB before the error (whole files
   // and lines copied); lines are now read one at a time and at most 64 kB of one is held. Here
   // (1 MB) from text and from a scenario directory on disk.
   const std::string header = "query_index,match_index,tx,ty,tz,qx,qy,qz,qw,relative_yaw,inliers,label\n";

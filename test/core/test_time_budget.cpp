@@ -1,5 +1,5 @@
 // The time budget bounds a verification and the commit of a loop accepted without a prior,
-// whatever the graph (issue 13 item 3): a trial that cannot reach the end of its first Ceres
+// whatever the graph: a trial that cannot reach the end of its first Ceres
 // iteration within the budget is not started (neither building it nor one iteration can be
 // interrupted: one iteration over 20k keyframes took 531 ms), and the solve stops before an
 // iteration that would end past it. Nothing here measures time: the tests assert on reasons,

@@ -11,7 +11,7 @@ from roverlib import bench, splits
 
 bench_cost, bench_poc, bench_posegraph, bench_real = (script(f"bench/{f}.py") for f in ("cost", "poc", "posegraph", "real"))
 
-# what other tools read (issue 11): never rename
+# what other tools read: never rename
 COLUMNS = ["family", "split", "case", "method", "tp", "fp", "fn", "precision", "recall", "ate", "ate_true_only", "tate",
            "verify_ms_p50", "verify_ms_p99"]
 
@@ -64,7 +64,7 @@ def test_poc_quick(tmp_path, capsys):
     cases = [c.name for c in splits.cases("poc", "test", quick=True)]
     assert sorted({r["case"] for r in rows}) == sorted(cases) and {r["split"] for r in rows} == {"test"}
     want = {"odometry", "gnc", "dcs"} | {f"{m}+{b}" for m in ("rover", "accept_all", "pcm", "ipc") for b in ("lf", "lm")}
-    assert {r["method"] for r in rows} == want, "the peers on the simulated scenes too (issue 19)"
+    assert {r["method"] for r in rows} == want, "the peers on the simulated scenes too"
     for case in cases:
         odo = _by(rows, case, "odometry")
         assert odo["precision"] == "" and int(odo["fn"]) == 40, "no decision: precision '-'"
@@ -168,7 +168,7 @@ def test_set_parameters_become_rover_replay_flags():
 
 
 def test_agreement_quick(tmp_path):
-    # The condensed trial against the full-window trial (issue 13): every family and comparison
+    # The condensed trial against the full-window trial: every family and comparison
     # gets a summary row over real candidates, and on the same graph and X (same-state) the two
     # trials decide alike: a condensed trial that moved the keyframes wrongly would not.
     agreement = script("bench/agreement.py")
@@ -196,7 +196,7 @@ def test_agreement_quick(tmp_path):
 
 
 def test_robustness_quick(tmp_path):
-    """bench.sh robustness (issue 19's +-10 % target): every case runs at every setting with the
+    """bench.sh robustness (the +-10 % target): every case runs at every setting with the
     setting's parameter scaled from the case's YAML, the counts from the verdicts match
     rover_replay's own, and summary.md pools them per family."""
     robustness = script("bench/robustness.py")

@@ -61,7 +61,7 @@ def copy_of_the_package(tmp_path):
 def test_every_dependency_is_mapped_and_installed_by_the_setup():
     assert coverage_errors(ROOT) == []
     installed, _ = setup_packages(ROOT)
-    # what issue 10 found missing on a fresh Debian 12
+    # what was found missing on a fresh Debian 12
     assert {"build-essential", "cmake", "python3-geometry-msgs"} <= installed
     assert {"roscpp", "geometry_msgs", "rospy", "rostest"} <= set(package_xml_keys(ROOT))
 
@@ -80,7 +80,7 @@ def test_a_dependency_without_mapping_fails(tmp_path):
 
 
 def test_a_mapped_package_the_setup_does_not_install_fails(tmp_path):
-    """The class of mistake of issue 10: a set-up that installs a hand-kept list (here the list
+    """A class of mistake: a set-up that installs a hand-kept list (here the list
     scripts/setup.sh had then) instead of what package.xml derives."""
     root = copy_of_the_package(tmp_path)
     setup = (root / SETUP).read_text()

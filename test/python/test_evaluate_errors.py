@@ -1,4 +1,4 @@
-"""scripts/evaluate.py on malformed input (issue 14's red team): one line
+"""scripts/evaluate.py on malformed input (a red team's findings): one line
 "evaluate.py: error: FILE[:LINE]: what" and exit status 2, never a traceback; a byte-order
 mark in a label file is not an error."""
 import pytest
@@ -95,7 +95,7 @@ def test_missing_columns_and_missing_files(tmp_path, capsys, good_labels):
     assert "nope.csv: cannot read the verdict log: No such file or directory" in err[0]
 
 
-# ---- issue 22 item 5: figures a user must not trust are refused, with the reason ----------------
+# ---- figures a user must not trust are refused, with the reason ----------------
 
 def node_log(tmp_path, rows, name="node.csv"):
     """A node's ~verdict_log: rows (query, match, accepted, reason, score, final, decision)."""
@@ -238,7 +238,7 @@ def test_metrics_json_is_strict_json(tmp_path, capsys):
 @pytest.mark.parametrize("bad, why", [("nan", "x 'nan' is not finite"), ("dup", "stamp 2 repeats line 3"),
                                       ("short", "7 values, a line of a TUM ground truth has 8 (stamp x y z qx qy qz qw)")])
 def test_ground_truth_with_nan_or_repeated_stamps_is_refused(tmp_path, capsys, good_labels, bad, why):
-    # issue 22 item 8: ground truth with NaN or duplicate rows was accepted ("SVD did not converge",
+    # ground truth with NaN or duplicate rows was accepted ("SVD did not converge",
     # or an ATE against the wrong pose).
     rows = [f"{i} {i}.0 0 0 0 0 0 1" for i in range(1, 6)]
     if bad == "nan":

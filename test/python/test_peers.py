@@ -69,7 +69,7 @@ def test_one_drift_model_feeds_every_method():
 
 
 def test_the_drift_model_is_the_shipped_yamls():
-    """Issue 19 item 3: one drift model. The peers' covariances come from the verifier YAMLs'
+    """One drift model. The peers' covariances come from the verifier YAMLs'
     drift_* and loop_sigma* (what ROVER's chi2 and revisit rules use), not from numbers of
     their own; a changed YAML changes the model."""
     import yaml

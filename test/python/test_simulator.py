@@ -231,7 +231,7 @@ def test_simulate_exposes_the_false_candidate_distance(tmp_path):
 
 
 def test_replay_says_when_a_query_is_older_than_its_match(tmp_path):
-    """Issue 22 item 8: rover_replay verifies a candidate when its query keyframe arrives; a match
+    """rover_replay verifies a candidate when its query keyframe arrives; a match
     that comes later in keyframes.csv was reported as "unknown match keyframe"."""
     tool = built_tool("rover_replay")
     s = scenes.make_scene("room", 0.05, seed=3, n_true=2, n_false=2)

@@ -1,4 +1,4 @@
-"""scripts/bench/targets.py: issue 19's targets per case, read back from benchmark folders.
+"""scripts/bench/targets.py: the project's targets per case, read back from benchmark folders.
 Each target must be judged missed where it is missed, met where it is met and exempt only
 where every peer is below 0.9; the causes must name the rule that lost a true loop and the path
 that let a false one in. Synthetic folders of the layout the family benchmarks write."""

@@ -1013,7 +1013,7 @@ TEST_F(Adapter, HeldLoopsAreAppliedWhenReleasedRemovedWhenRevokedAndSavedOnlyWhi
 }
 
 TEST_F(Adapter, CandidatesStillHeldWhenLoopFusionEndsGetTheirFinalVerdict) {
-  // Issue 22 item 9: a candidate still held when loop_fusion ended kept only its deferred
+  // A candidate still held when loop_fusion ended kept only its deferred
   // verdict (final false): the verdict log had no final verdict for it. Now the adapter's end
   // (finish(), from its destructor) drops it: unconfirmed, decision drop, on the topic and in
   // the log; later loops are rejected.
@@ -1311,7 +1311,7 @@ HostRun runHost(const std::string& name, const std::string& args = "") {
 }  // namespace
 
 TEST(AdapterStop, ALoopFusionThatEndsByTerminateStillLogsTheFinalVerdictOfAHeldCandidate) {
-  // Issue 22 item 9: upstream loop_fusion ends by std::terminate (its main returns with joinable
+  // Upstream loop_fusion ends by std::terminate (its main returns with joinable
   // threads: exit status -6 after the 's' save and after Ctrl-C); no destructor runs, so a
   // candidate still held kept only its deferred row. The adapter's terminate handler gives it its
   // final verdict and flushes the log before the abort.

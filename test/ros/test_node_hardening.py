@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rover_verifier_node against the red team's findings (issue 14), each node started by the test
+"""rover_verifier_node against the red team's findings, each node started by the test
 with its own parameters (node_hardening.test starts none):
 
 - a burst of verdicts (thousands of candidates timing out together) reaches a subscriber that

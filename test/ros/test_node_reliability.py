@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""rover_verifier_node and rover_replay against issue 22's reliability findings, each node started
+"""rover_verifier_node and rover_replay against the reliability findings, each node started
 by the test with its own parameters (node_reliability.test starts none):
 
 - a repeated candidate (the same loop again), which the verifier refuses as a copy of a loop in
@@ -140,7 +140,7 @@ class NodeReliability(unittest.TestCase):
                          [r["detail"] for r in refused])
 
     def test_a_small_queue_size_is_raised_with_a_warning_and_a_slow_subscriber_gets_every_verdict(self):
-        # issue 22 item 6: queue_size 1 was accepted and also set the verdict queue: with a slow
+        # queue_size 1 was accepted and also set the verdict queue: with a slow
         # subscriber, 2 of 60 verdicts arrived and nothing said so.
         n = 60
         node = Node("small_queue", {"queue_size": 1, "candidate_timeout": 1.0, "optimize_period": 0.0})
@@ -199,7 +199,7 @@ class NodeReliability(unittest.TestCase):
         finally:
             node.stop()
     def test_an_impossible_index_is_invalid_at_once_and_a_query_older_than_its_match_is_named(self):
-        # issue 22 item 8: a 2^62 index waited the whole candidate_timeout and was reported with
+        # a 2^62 index waited the whole candidate_timeout and was reported with
         # query_index -1.
         node = Node("indices", {"candidate_timeout": 60.0, "optimize_period": 0.0})
         try:
@@ -226,7 +226,7 @@ class NodeReliability(unittest.TestCase):
             node.stop()
 
     def test_candidates_undecided_when_the_master_restarts_get_their_final_verdict_in_the_log(self):
-        # issue 22 item 9: a run that ended because the master restarted (exit status 2) gave the
+        # a run that ended because the master restarted (exit status 2) gave the
         # candidates still waiting or held no final verdict: the CSV log lacked them.
         masters = PrivateMaster("/node_reliability")
         env = masters.env
@@ -268,7 +268,7 @@ class NodeReliability(unittest.TestCase):
                 os.unlink(log)
 
     def test_a_nan_relative_yaw_is_derived_as_loop_fusions_relative_yaw(self):
-        # issue 22 item 9: a candidate message with relative_yaw NaN took the yaw of the relative
+        # a candidate message with relative_yaw NaN took the yaw of the relative
         # rotation (the old convention); on a tilted body (EuRoC's IMU) an exact loop was then
         # 9 deg off and chi2 rejected it (d2 48 > 18.5). loop_fusion's loop_info[7] is the
         # difference of the keyframes' world yaws.

@@ -1,4 +1,4 @@
-// The CSV verdict log (verdict_log.h) on a full disk (issue 22 item 3): rows are whole or
+// The CSV verdict log (verdict_log.h) on a full disk: rows are whole or
 // absent, the header is always the first line (also when the disk is full when the log is
 // opened and space frees later), and the rows counted as failed are exactly the rows missing
 // from the file. Two ways to fill a disk: a write function that behaves like write(2) on a disk
