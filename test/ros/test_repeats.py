@@ -14,16 +14,14 @@ import importlib.util
 import os
 import re
 import subprocess
-import sys
 import tempfile
 import unittest
 
 import rospy
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from test_node_hardening import Node  # noqa: E402
-from test_node_reliability import assert_same_verdicts, find_tool  # noqa: E402
-from roverlib import bag, bag_replay, metrics, repeats, scenario  # noqa: E402
+from test_node_hardening import Node  # test/ros/, beside this file (rostest runs it as a program)
+from test_node_reliability import assert_same_verdicts, find_tool
+from roverlib import bag, bag_replay, metrics, repeats, scenario
 
 PKG = "rover_loop_fusion"
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
