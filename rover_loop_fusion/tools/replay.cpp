@@ -172,367 +172,401 @@ bool writeTum(const std::string& path, const std::vector<double>& stamps,
   return true;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+/// What the command line asks for.
+struct Options {
   std::string scenario_dir, out_dir, protocol = "sequential";
   core::VerifierConfig cfg;
-  // The relocalisation policy's two flags, applied after every other parameter (a YAML does not
-  // set them: the hosts ignore them there too). Default: the product's policy, confirm.
-  core::VerifierConfig policy;
   std::string relocalisation = "confirm";  // "" once the two flags are set one by one
-  bool policy_given = false;
   bool quiet = false;
   int snapshots = 0;
   int compare_trials = -1;
-  auto fail = [](const std::string& what) {
-    std::fprintf(stderr, "rover_replay: %s (rover_replay --help lists the parameters)\n", what.c_str());
-    return 2;
-  };
+};
+
+int fail(const std::string& what) {
+  std::fprintf(stderr, "rover_replay: %s (rover_replay --help lists the parameters)\n", what.c_str());
+  return 2;
+}
+
+/// The value of a boolean flag at argv[*i]: the next word if it is a boolean (consumed), else "true".
+std::string booleanText(int argc, char** argv, int* i) {
+  const core::ParameterValue next = *i + 1 < argc ? core::ParameterValue::parse(argv[*i + 1]) : core::ParameterValue();
+  return next.type == core::ParameterValue::Type::kBoolean ? argv[++*i] : "true";
+}
+
+/// Parses the command line into *o; returns -1 to run, or the exit status (help, an error).
+int parseArguments(int argc, char** argv, Options* o) {
+  // The relocalisation policy's two flags, applied after every other parameter (a YAML does not
+  // set them: the hosts ignore them there too). Default: the product's policy, confirm.
+  core::VerifierConfig policy;
+  bool policy_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const bool has_value = i + 1 < argc;
     const core::Parameter* p = a.compare(0, 2, "--") == 0 ? core::findParameter(a.substr(2)) : nullptr;
+    std::string why;
     if (p && (p->name == "accept_without_prior" || p->name == "confirm_without_prior")) {
       // A/B: set one by one; from the core's defaults unless --relocalisation came before.
       if (!policy_given) policy = core::VerifierConfig();
       policy_given = true;
-      relocalisation.clear();
-      const core::ParameterValue next = has_value ? core::ParameterValue::parse(argv[i + 1]) : core::ParameterValue();
-      const std::string text = next.type == core::ParameterValue::Type::kBoolean ? argv[++i] : "true";
-      std::string why;
-      if (!core::assignParameter(*p, core::ParameterValue::parse(text), &policy, &why)) return fail(a + ": " + why);
+      o->relocalisation.clear();
+      if (!core::assignParameter(*p, core::ParameterValue::parse(booleanText(argc, argv, &i)), &policy, &why))
+        return fail(a + ": " + why);
     } else if (a == "--relocalisation") {
       if (!has_value) return fail(a + " needs a value");
-      relocalisation = argv[++i];
-      if (!applyRelocalisation(relocalisation, &policy))
-        return fail("--relocalisation must be confirm, reject or accept_unverified (got '" + relocalisation + "')");
+      o->relocalisation = argv[++i];
+      if (!applyRelocalisation(o->relocalisation, &policy))
+        return fail("--relocalisation must be confirm, reject or accept_unverified (got '" + o->relocalisation + "')");
       policy_given = true;
     } else if (p) {
-      std::string text;
-      if (p->type == core::Parameter::Type::kBoolean) {
-        // --flag alone means true; --flag true|false (any other next word is the next flag).
-        const core::ParameterValue next = has_value ? core::ParameterValue::parse(argv[i + 1])
-                                                    : core::ParameterValue();
-        text = next.type == core::ParameterValue::Type::kBoolean ? argv[++i] : "true";
-      } else if (has_value) {
-        text = argv[++i];
-      } else {
-        return fail(a + " needs a value");
-      }
-      std::string why;
-      if (!core::assignParameter(*p, core::ParameterValue::parse(text), &cfg, &why))
-        return fail(a + ": " + why);
+      // --flag alone means true; --flag true|false (any other next word is the next flag).
+      if (p->type != core::Parameter::Type::kBoolean && !has_value) return fail(a + " needs a value");
+      const std::string text = p->type == core::Parameter::Type::kBoolean ? booleanText(argc, argv, &i) : argv[++i];
+      if (!core::assignParameter(*p, core::ParameterValue::parse(text), &o->cfg, &why)) return fail(a + ": " + why);
     } else if (a == "--help" || a == "-h") {
       return usage(0);
     } else if (!has_value && a != "--quiet") {
       return fail(a.compare(0, 2, "--") == 0 ? "unknown or incomplete option " + a : "unexpected argument " + a);
-    } else if (a == "--scenario") scenario_dir = argv[++i];
-    else if (a == "--out") out_dir = argv[++i];
-    else if (a == "--protocol") protocol = argv[++i];
+    } else if (a == "--scenario") o->scenario_dir = argv[++i];
+    else if (a == "--out") o->out_dir = argv[++i];
+    else if (a == "--protocol") o->protocol = argv[++i];
     else if (a == "--config") {
-      std::string error;
-      if (!core::readParameterFile(argv[++i], &cfg, &error)) return fail(error);
+      if (!core::readParameterFile(argv[++i], &o->cfg, &why)) return fail(why);
     } else if (a == "--snapshots") {
-      if (!count(argv[++i], &snapshots)) return fail("--snapshots must be a count (got '" + std::string(argv[i]) + "')");
+      if (!count(argv[++i], &o->snapshots)) return fail("--snapshots must be a count (got '" + std::string(argv[i]) + "')");
     } else if (a == "--compare-trials") {
-      if (!count(argv[++i], &compare_trials) || compare_trials < 1)
+      if (!count(argv[++i], &o->compare_trials) || o->compare_trials < 1)
         return fail("--compare-trials must be a keyframe count >= 1 (got '" + std::string(argv[i]) + "')");
-    } else if (a == "--quiet") quiet = true;
+    } else if (a == "--quiet") o->quiet = true;
     else return fail("unknown option " + a);
   }
-  if (!policy_given) applyRelocalisation(relocalisation, &policy);
-  cfg.host.accept_without_prior = policy.host.accept_without_prior;
-  cfg.host.confirm_without_prior = policy.host.confirm_without_prior;
-  if (scenario_dir.empty() || out_dir.empty()) return usage(2);
-  if (protocol != "sequential" && protocol != "oracle" && protocol != "none")
-    return fail("--protocol must be sequential, oracle or none (got '" + protocol + "')");
-  const std::string invalid = cfg.validate();
+  if (!policy_given) applyRelocalisation(o->relocalisation, &policy);
+  o->cfg.host.accept_without_prior = policy.host.accept_without_prior;
+  o->cfg.host.confirm_without_prior = policy.host.confirm_without_prior;
+  if (o->scenario_dir.empty() || o->out_dir.empty()) return usage(2);
+  if (o->protocol != "sequential" && o->protocol != "oracle" && o->protocol != "none")
+    return fail("--protocol must be sequential, oracle or none (got '" + o->protocol + "')");
+  const std::string invalid = o->cfg.validate();
   if (!invalid.empty()) return fail("invalid parameters: " + invalid);
-  if (!quiet)
-    std::printf("rover_replay: %s; relocalisation: %s (accept_without_prior %s, confirm_without_prior %s)\n",
-                core::describe(cfg).c_str(), relocalisation.empty() ? "set by flags" : relocalisation.c_str(),
-                cfg.host.accept_without_prior ? "true" : "false", cfg.host.confirm_without_prior ? "true" : "false");
-  sim::Scenario s;
-  std::string error;
-  if (!sim::loadScenario(scenario_dir, &s, &error)) {
-    std::fprintf(stderr, "rover_replay: %s\n", error.c_str());
-    return 1;
+  return -1;
+}
+
+/// A file of the output directory, opened for writing with its header line; nullptr (said) if not.
+std::FILE* openOutput(const std::string& out_dir, const char* name, const std::string& header) {
+  std::FILE* f = std::fopen((out_dir + "/" + name).c_str(), "w");
+  if (!f) {
+    std::fprintf(stderr, "rover_replay: cannot write %s/%s\n", out_dir.c_str(), name);
+    return nullptr;
   }
-  makeDirs(out_dir);
-  std::FILE* csv = std::fopen((out_dir + "/verdicts.csv").c_str(), "w");
-  if (!csv) {
-    std::fprintf(stderr, "rover_replay: cannot write %s/verdicts.csv\n", out_dir.c_str());
-    return 1;
+  std::fprintf(f, "%s\n", header.c_str());
+  return f;
+}
+
+std::string trialsHeader() {
+  std::string h = "query_index,match_index,label";
+  for (const std::string k : {"full", "condensed"})
+    for (const char* col : {"accepted", "reason", "score", "threshold", "window", "iterations", "ms"})
+      h += "," + k + "_" + col;
+  return h;
+}
+
+/// One row per candidate, written at the end: a held candidate's row becomes its final
+/// decision (released, dropped), an accepted loop's row "revoked" if a revocation comes.
+struct Row {
+  core::Verdict verdict;
+  int label = -1;
+  double query_stamp = 0.0, match_stamp = 0.0;
+  int inliers = -1;
+  const char* decision = "verify";  // or the later decision: release, drop, revoke
+  // Keyframes the verifier held when the candidate was verified, when its final decision
+  // came, and (released) when the first member of its released group was verified.
+  size_t verified_at = 0, decided_at = 0, group_first_at = 0;
+};
+
+using Key = std::pair<int64_t, int64_t>;
+Key key(const core::LoopCandidate& c) { return std::make_pair(c.query_index, c.match_index); }
+
+/// The run: the scenario's keyframes in order, each candidate verified once its query keyframe
+/// is in the graph (file order kept), beside loop_fusion's graph with every candidate.
+class Replay {
+ public:
+  Replay(const Options& o, const sim::Scenario& s)
+      : o_(o), s_(s), verifier_(o.cfg), accept_all_(verifier_.config()) {
+    for (size_t i = 0; i < s.candidates.size(); ++i) by_query_.emplace(s.candidates[i].candidate.query_index, i);
+    for (const sim::ScenarioKeyframe& k : s.keyframes) ++upcoming_[k.index];
+    // odometry.csv: the step covariances the data carries (the uncertainty uses them instead of
+    // the drift model's).
+    for (const auto& sc : s.step_covariance) step_covariance_[sc.first] = &sc.second;
   }
-  // The verdict log's columns, then when the decision was made (docs/scenario-format.md).
-  std::fprintf(csv, "%s,verified_at_keyframe,decided_at_keyframe,group_first_at_keyframe\n",
-               core::verdictCsvHeader().c_str());
-  std::FILE* keyframe_csv = std::fopen((out_dir + "/keyframe_ms.csv").c_str(), "w");
-  if (!keyframe_csv) {
-    std::fprintf(stderr, "rover_replay: cannot write %s/keyframe_ms.csv\n", out_dir.c_str());
-    return 1;
-  }
-  std::fprintf(keyframe_csv, "index,add_keyframe_ms,decisions\n");
-  std::FILE* intake_csv = std::fopen((out_dir + "/intake.csv").c_str(), "w");
-  if (!intake_csv) {
-    std::fprintf(stderr, "rover_replay: cannot write %s/intake.csv\n", out_dir.c_str());
-    return 1;
-  }
-  std::fprintf(intake_csv, "index,sequence,stamp,kept,message\n");
-  std::FILE* trials_csv = nullptr;
-  if (compare_trials > 0) {
-    trials_csv = std::fopen((out_dir + "/trials.csv").c_str(), "w");
-    if (!trials_csv) {
-      std::fprintf(stderr, "rover_replay: cannot write %s/trials.csv\n", out_dir.c_str());
+
+  /// Writes every output file; the exit status.
+  int run() {
+    csv_ = openOutput(o_.out_dir, "verdicts.csv",
+                      core::verdictCsvHeader() + ",verified_at_keyframe,decided_at_keyframe,group_first_at_keyframe");
+    keyframe_csv_ = openOutput(o_.out_dir, "keyframe_ms.csv", "index,add_keyframe_ms,decisions");
+    intake_csv_ = openOutput(o_.out_dir, "intake.csv", "index,sequence,stamp,kept,message");
+    if (o_.compare_trials > 0) trials_csv_ = openOutput(o_.out_dir, "trials.csv", trialsHeader());
+    if (!csv_ || !keyframe_csv_ || !intake_csv_ || (o_.compare_trials > 0 && !trials_csv_)) return 1;
+    if (o_.snapshots > 0) makeDirs(o_.out_dir + "/snapshots");
+    for (const sim::ScenarioKeyframe& k : s_.keyframes) addKeyframe(k);
+    // Candidates whose query keyframe never arrived: still a verdict each (invalid input).
+    for (const auto& left : by_query_) handle(s_.candidates[left.second]);
+    writeRows();
+    // Snapshots still due (the last keyframes were refused).
+    for (; o_.snapshots > 0 && next_snapshot_ <= static_cast<size_t>(o_.snapshots); ++next_snapshot_)
+      takeSnapshot(next_snapshot_);
+    for (std::FILE* f : {csv_, keyframe_csv_, intake_csv_, trials_csv_})
+      if (f) std::fclose(f);
+    if (!writeTrajectories() || !snapshots_ok_) {
+      std::fprintf(stderr, "rover_replay: cannot write trajectories to %s\n", o_.out_dir.c_str());
       return 1;
     }
-    std::fprintf(trials_csv, "query_index,match_index,label");
-    for (const char* k : {"full", "condensed"})
-      std::fprintf(trials_csv, ",%s_accepted,%s_reason,%s_score,%s_threshold,%s_window,%s_iterations,%s_ms", k, k, k,
-                   k, k, k, k);
-    std::fprintf(trials_csv, "\n");
+    printSummary();
+    return 0;
   }
 
-  // Candidates are verified once their query keyframe is in the graph (file order kept).
-  std::multimap<int64_t, size_t> by_query;
-  for (size_t i = 0; i < s.candidates.size(); ++i)
-    by_query.emplace(s.candidates[i].candidate.query_index, i);
-  std::map<int64_t, double> stamp_of;
-  std::map<int64_t, int> upcoming;  // keyframe indices still to come (how often)
-  for (const sim::ScenarioKeyframe& k : s.keyframes) ++upcoming[k.index];
+ private:
+  void addKeyframe(const sim::ScenarioKeyframe& k) {
+    ++handled_keyframes_;
+    if (--upcoming_[k.index] == 0) upcoming_.erase(k.index);
+    const auto given = step_covariance_.find(k.index);
+    const auto t0 = std::chrono::steady_clock::now();
+    const core::Status st = verifier_.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q,
+                                                  given == step_covariance_.end() ? nullptr : given->second);
+    const double add_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    add_keyframe_ms_.push_back(add_ms);
+    accept_all_.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
+    std::fprintf(intake_csv_, "%lld,%d,%.9f,%d,%s\n", static_cast<long long>(k.index), k.sequence, k.stamp,
+                 st ? 1 : 0, csvQuoted(st.message).c_str());
+    if (!st) {
+      ++refused_keyframes_;
+      std::fprintf(keyframe_csv_, "%lld,%.4f,0\n", static_cast<long long>(k.index), add_ms);
+      if (!o_.quiet) std::printf("keyframe refused: %s\n", st.message.c_str());
+      return;
+    }
+    ++keyframes_held_;
+    if (st.warning() && !o_.quiet) std::printf("keyframe warning: %s\n", st.message.c_str());
+    std::fprintf(keyframe_csv_, "%lld,%.4f,%zu\n", static_cast<long long>(k.index), add_ms, takeDecisions());
+    stamp_of_[k.index] = k.stamp;
+    stamps_.push_back(k.stamp);
+    odometry_.push_back(k.vio);
+    auto range = by_query_.equal_range(k.index);
+    for (auto it = range.first; it != range.second; ++it) handle(s_.candidates[it->second]);
+    by_query_.erase(range.first, range.second);
+    // Snapshot k (1..K) is taken once the first ceil(k * N / K) keyframes have been handled.
+    for (; o_.snapshots > 0 && next_snapshot_ <= static_cast<size_t>(o_.snapshots) &&
+           handled_keyframes_ * o_.snapshots >= next_snapshot_ * s_.keyframes.size();
+         ++next_snapshot_)
+      takeSnapshot(next_snapshot_);
+  }
 
-  core::Verifier verifier(cfg);
-  core::KeyframeGraph accept_all(verifier.config());  // loop_fusion's graph with every candidate
-  int tp = 0, fp = 0, tn = 0, fn = 0, refused_keyframes = 0, oracle_refused = 0;
-  size_t verified = 0;
-  double verify_ms = 0.0;
-  std::vector<double> stamps;
-  std::vector<double> add_keyframe_ms;
-  std::vector<core::Pose> odometry;
-  // One row per candidate, written at the end: a held candidate's row becomes its final
-  // decision (released, dropped), an accepted loop's row "revoked" if a revocation comes.
-  struct Row {
-    core::Verdict verdict;
-    int label = -1;
-    double query_stamp = 0.0, match_stamp = 0.0;
-    int inliers = -1;
-    const char* decision = "verify";  // or the later decision: release, drop, revoke
-    // Keyframes the verifier held when the candidate was verified, when its final decision
-    // came, and (released) when the first member of its released group was verified.
-    size_t verified_at = 0, decided_at = 0, group_first_at = 0;
-  };
-  std::vector<Row> rows;
-  // The rows open for a later decision, by (query, match), oldest first (the same loop may be
-  // proposed again while held: the verifier decides each copy, in the order they came): held
-  // ones for their release or drop, accepted ones for a revocation.
-  std::map<std::pair<int64_t, int64_t>, std::deque<size_t>> held_rows, accepted_rows;
-  std::map<std::pair<int64_t, int64_t>, size_t> last_row;   // every candidate's latest row
-  size_t keyframes_held = 0;  // keyframes the verifier has accepted so far
-  auto key = [](const core::LoopCandidate& c) { return std::make_pair(c.query_index, c.match_index); };
-  auto takeDecisions = [&]() {
-    const std::vector<core::LoopDecision> decisions = verifier.takeDecisions();
+  void writeTrial(const sim::ScenarioCandidate& sc) {
+    const core::LoopCandidate& c = sc.candidate;
+    const std::pair<core::Verdict, core::Verdict> t = verifier_.compareTrials(c, o_.compare_trials);
+    std::fprintf(trials_csv_, "%lld,%lld,%d", static_cast<long long>(c.query_index),
+                 static_cast<long long>(c.match_index), sc.label);
+    for (const core::Verdict* x : {&t.first, &t.second})
+      std::fprintf(trials_csv_, ",%d,%s,%.6f,%.6f,%d,%d,%.4f", x->accepted ? 1 : 0, core::toString(x->reason),
+                   x->score, x->threshold, x->window_size, x->iterations, x->elapsed_ms);
+    std::fprintf(trials_csv_, "\n");
+  }
+
+  void handle(const sim::ScenarioCandidate& sc) {
+    const core::LoopCandidate& c = sc.candidate;
+    if (trials_csv_) writeTrial(sc);
+    // A match that has not arrived but comes later: the query is older than its match (the
+    // verifier would only know "unknown match keyframe"; the node says the same as this).
+    core::Verdict v = !stamp_of_.count(c.match_index) && upcoming_.count(c.match_index)
+                          ? core::Verdict::Reject(core::Reason::kInvalidInput, c,
+                                                  "match keyframe " + std::to_string(c.match_index) +
+                                                      " comes after query keyframe " + std::to_string(c.query_index) +
+                                                      " in keyframes.csv: the match must be the older keyframe")
+                          : verifier_.verify(c);
+    ++verified_;
+    verify_ms_ += v.elapsed_ms;
+    if (o_.protocol == "sequential" && v.accepted) {
+      // What the product does (VerifierHost::decide): a loop whose commit is refused (the same
+      // loop again) is not in the graph, and its verdict says so.
+      core::rejectRefusedCommit(&v, verifier_.commit(c));
+    } else if (o_.protocol == "oracle" && sc.label == 1) {
+      // The oracle's graph: every true loop once (a repeated one is refused; the verdict is
+      // verify()'s, the ranking protocol's score).
+      if (!verifier_.commit(c)) ++oracle_refused_;
+    }
+    accept_all_.addLoop(c);
+    Row row;
+    row.verdict = v;
+    row.label = sc.label;
+    row.query_stamp = stamp_of_.count(c.query_index) ? stamp_of_[c.query_index] : 0.0;
+    row.match_stamp = stamp_of_.count(c.match_index) ? stamp_of_[c.match_index] : 0.0;
+    row.inliers = c.inliers;
+    row.verified_at = row.decided_at = row.group_first_at = keyframes_held_;
+    rows_.push_back(row);
+    last_row_[key(c)] = rows_.size() - 1;
+    if (v.deferred) held_rows_[key(c)].push_back(rows_.size() - 1);
+    if (v.accepted) accepted_rows_[key(c)].push_back(rows_.size() - 1);
+    if (!o_.quiet)
+      std::printf("%7lld -> %7lld  label %2d  %-8s %-22s score %8.3f  %6.2f ms\n",
+                  static_cast<long long>(c.query_index), static_cast<long long>(c.match_index), sc.label,
+                  v.accepted ? "ACCEPT" : v.deferred ? "HOLD" : "REJECT", core::toString(v.reason), v.score,
+                  v.elapsed_ms);
+    takeDecisions();
+  }
+
+  /// The verifier's later decisions (release, drop, revoke) onto the rows they decide; their count.
+  size_t takeDecisions() {
+    const std::vector<core::LoopDecision> decisions = verifier_.takeDecisions();
     // A group is released in one call: its decisions come in a row, with the same detail.
     std::string group_detail;
     std::vector<size_t> group_rows;
     size_t group_first = 0;
     auto closeGroup = [&]() {
-      for (size_t r : group_rows) rows[r].group_first_at = group_first;
+      for (size_t r : group_rows) rows_[r].group_first_at = group_first;
       group_rows.clear();
       group_detail.clear();
     };
     for (const core::LoopDecision& d : decisions) {
-      auto& open = (d.kind == core::LoopDecision::Kind::kRevoke ? accepted_rows : held_rows)[key(d.candidate)];
+      auto& open = (d.kind == core::LoopDecision::Kind::kRevoke ? accepted_rows_ : held_rows_)[key(d.candidate)];
       if (d.kind != core::LoopDecision::Kind::kRelease || d.verdict.detail != group_detail) closeGroup();
       if (open.empty()) continue;
       const size_t at = open.front();
       open.pop_front();
-      Row& row = rows[at];
-      core::Verdict& v = row.verdict;
-      const int label = row.label;
-      row.decided_at = keyframes_held;
+      Row& row = rows_[at];
+      row.decided_at = keyframes_held_;
       if (d.kind == core::LoopDecision::Kind::kRelease) {
         if (group_rows.empty()) {
           group_detail = d.verdict.detail;
           group_first = row.verified_at;
-          std::pair<int64_t, int64_t> front;
-          if (groupFront(d.verdict.detail, &front) && last_row.count(front))
-            group_first = std::min(group_first, rows[last_row[front]].verified_at);
+          Key front;
+          if (groupFront(d.verdict.detail, &front) && last_row_.count(front))
+            group_first = std::min(group_first, rows_[last_row_[front]].verified_at);
         }
         group_first = std::min(group_first, row.verified_at);
         group_rows.push_back(at);
       }
-      v.accepted = d.verdict.accepted;
-      v.deferred = false;
-      v.reason = d.verdict.reason;
-      v.detail = std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + v.detail + ")";
-      row.decision = core::toString(d.kind);
-      if (v.accepted) accepted_rows[key(d.candidate)].push_back(at);
-      if (!quiet)
-        std::printf("%7lld -> %7lld  label %2d  %-8s %s\n", static_cast<long long>(d.candidate.query_index),
-                    static_cast<long long>(d.candidate.match_index), label, core::toString(d.kind),
-                    d.verdict.detail.c_str());
+      apply(d, &row);
+      if (row.verdict.accepted) accepted_rows_[key(d.candidate)].push_back(at);
     }
     closeGroup();
     return decisions.size();
-  };
-  auto handle = [&](const sim::ScenarioCandidate& sc) {
-    const core::LoopCandidate& c = sc.candidate;
-    if (trials_csv) {
-      const std::pair<core::Verdict, core::Verdict> t = verifier.compareTrials(c, compare_trials);
-      std::fprintf(trials_csv, "%lld,%lld,%d", static_cast<long long>(c.query_index),
-                   static_cast<long long>(c.match_index), sc.label);
-      for (const core::Verdict* x : {&t.first, &t.second})
-        std::fprintf(trials_csv, ",%d,%s,%.6f,%.6f,%d,%d,%.4f", x->accepted ? 1 : 0, core::toString(x->reason),
-                     x->score, x->threshold, x->window_size, x->iterations, x->elapsed_ms);
-      std::fprintf(trials_csv, "\n");
-    }
-    // A match that has not arrived but comes later: the query is older than its match (the
-    // verifier would only know "unknown match keyframe"; the node says the same as this).
-    core::Verdict v = !stamp_of.count(c.match_index) && upcoming.count(c.match_index)
-                          ? core::Verdict::Reject(core::Reason::kInvalidInput, c,
-                                                  "match keyframe " + std::to_string(c.match_index) +
-                                                      " comes after query keyframe " + std::to_string(c.query_index) +
-                                                      " in keyframes.csv: the match must be the older keyframe")
-                          : verifier.verify(c);
-    ++verified;
-    verify_ms += v.elapsed_ms;
-    if (protocol == "sequential" && v.accepted) {
-      // What the product does (VerifierHost::decide): a loop whose commit is refused (the same
-      // loop again) is not in the graph, and its verdict says so.
-      core::rejectRefusedCommit(&v, verifier.commit(c));
-    } else if (protocol == "oracle" && sc.label == 1) {
-      // The oracle's graph: every true loop once (a repeated one is refused; the verdict is
-      // verify()'s, the ranking protocol's score).
-      if (!verifier.commit(c)) ++oracle_refused;
-    }
-    accept_all.addLoop(c);
-    Row row;
-    row.verdict = v;
-    row.label = sc.label;
-    row.query_stamp = stamp_of.count(c.query_index) ? stamp_of[c.query_index] : 0.0;
-    row.match_stamp = stamp_of.count(c.match_index) ? stamp_of[c.match_index] : 0.0;
-    row.inliers = c.inliers;
-    row.verified_at = row.decided_at = row.group_first_at = keyframes_held;
-    rows.push_back(row);
-    last_row[key(c)] = rows.size() - 1;
-    if (v.deferred) held_rows[key(c)].push_back(rows.size() - 1);
-    if (v.accepted) accepted_rows[key(c)].push_back(rows.size() - 1);
-    if (!quiet)
-      std::printf("%7lld -> %7lld  label %2d  %-8s %-22s score %8.3f  %6.2f ms\n",
-                  static_cast<long long>(c.query_index), static_cast<long long>(c.match_index), sc.label,
-                  v.accepted ? "ACCEPT" : v.deferred ? "HOLD" : "REJECT", core::toString(v.reason), v.score, v.elapsed_ms);
-    takeDecisions();
-  };
-  // Snapshot k (1..K) is taken once the first ceil(k * N / K) keyframes have been handled.
-  size_t next_snapshot = 1, handled_keyframes = 0;
-  bool snapshots_ok = true;
-  if (snapshots > 0) makeDirs(out_dir + "/snapshots");
-  auto takeSnapshot = [&](size_t k) {
-    std::vector<core::Pose> est;
-    for (const core::TrajectoryPoint& p : verifier.trajectory()) est.push_back(p.estimate);
-    const std::string base = out_dir + "/snapshots/";
-    const std::string suffix = "_" + std::to_string(k) + ".tum";
-    snapshots_ok = snapshots_ok && writeTum(base + "verified" + suffix, stamps, est) &&
-                   writeTum(base + "loop_fusion_verified" + suffix, stamps, verifier.solveLikeLoopFusion(5).poses) &&
-                   writeTum(base + "loop_fusion_accept_all" + suffix, stamps, accept_all.solveLikeLoopFusion(5).poses);
-  };
-  // odometry.csv: the step covariances the data carries (the uncertainty uses them instead of
-  // the drift model's).
-  std::map<int64_t, const Eigen::Matrix4d*> step_covariance;
-  for (const auto& sc : s.step_covariance) step_covariance[sc.first] = &sc.second;
-  for (const sim::ScenarioKeyframe& k : s.keyframes) {
-    ++handled_keyframes;
-    if (--upcoming[k.index] == 0) upcoming.erase(k.index);
-    const auto given = step_covariance.find(k.index);
-    const auto t0 = std::chrono::steady_clock::now();
-    const core::Status st = verifier.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q,
-                                                 given == step_covariance.end() ? nullptr : given->second);
-    const double add_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    add_keyframe_ms.push_back(add_ms);
-    accept_all.addKeyframe(k.index, k.stamp, k.sequence, k.vio.t, k.vio.q);
-    std::fprintf(intake_csv, "%lld,%d,%.9f,%d,%s\n", static_cast<long long>(k.index), k.sequence, k.stamp, st ? 1 : 0,
-                 csvQuoted(st.message).c_str());
-    if (!st) {
-      ++refused_keyframes;
-      std::fprintf(keyframe_csv, "%lld,%.4f,0\n", static_cast<long long>(k.index), add_ms);
-      if (!quiet) std::printf("keyframe refused: %s\n", st.message.c_str());
-      continue;
-    }
-    ++keyframes_held;
-    if (st.warning() && !quiet) std::printf("keyframe warning: %s\n", st.message.c_str());
-    std::fprintf(keyframe_csv, "%lld,%.4f,%zu\n", static_cast<long long>(k.index), add_ms, takeDecisions());
-    stamp_of[k.index] = k.stamp;
-    stamps.push_back(k.stamp);
-    odometry.push_back(k.vio);
-    auto range = by_query.equal_range(k.index);
-    for (auto it = range.first; it != range.second; ++it) handle(s.candidates[it->second]);
-    by_query.erase(range.first, range.second);
-    for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots) &&
-           handled_keyframes * snapshots >= next_snapshot * s.keyframes.size();
-         ++next_snapshot)
-      takeSnapshot(next_snapshot);
   }
-  // Candidates whose query keyframe never arrived: still a verdict each (invalid input).
-  for (const auto& left : by_query) handle(s.candidates[left.second]);
-  // Still held when the run ends: not confirmed.
-  for (Row& r : rows) {
-    if (!r.verdict.deferred) continue;
-    r.verdict.deferred = false;
-    r.verdict.reason = core::Reason::kUnconfirmed;
-    r.verdict.detail = "still held when the run ended (" + r.verdict.detail + ")";
-    r.decision = "drop";
-    r.decided_at = keyframes_held;
-  }
-  for (const Row& r : rows) {
-    if (r.label == 1) (r.verdict.accepted ? tp : fn)++;
-    if (r.label == 0) (r.verdict.accepted ? fp : tn)++;
-    std::fprintf(csv, "%s,%zu,%zu,%zu\n",
-                 core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay", r.decision)
-                     .c_str(),
-                 r.verified_at, r.decided_at, r.group_first_at);
-  }
-  // Snapshots still due (the last keyframes were refused).
-  for (; snapshots > 0 && next_snapshot <= static_cast<size_t>(snapshots); ++next_snapshot) takeSnapshot(next_snapshot);
-  std::fclose(csv);
-  std::fclose(keyframe_csv);
-  std::fclose(intake_csv);
-  if (trials_csv) std::fclose(trials_csv);
 
-  std::vector<core::Pose> estimate;
-  for (const core::TrajectoryPoint& p : verifier.trajectory()) estimate.push_back(p.estimate);
-  const core::BatchSolveResult lf_verified = verifier.solveLikeLoopFusion(5);
-  const core::BatchSolveResult lf_all = accept_all.solveLikeLoopFusion(5);
-  bool ok = writeTum(out_dir + "/odometry.tum", stamps, odometry) &&
-            writeTum(out_dir + "/verified.tum", stamps, estimate) &&
-            writeTum(out_dir + "/loop_fusion_verified.tum", stamps, lf_verified.poses) &&
-            writeTum(out_dir + "/loop_fusion_accept_all.tum", stamps, lf_all.poses);
-  if (!s.truth.empty()) {
+  void apply(const core::LoopDecision& d, Row* row) const {
+    core::Verdict& v = row->verdict;
+    v.accepted = d.verdict.accepted;
+    v.deferred = false;
+    v.reason = d.verdict.reason;
+    v.detail = std::string(core::toString(d.kind)) + ": " + d.verdict.detail + " (at verify: " + v.detail + ")";
+    row->decision = core::toString(d.kind);
+    if (!o_.quiet)
+      std::printf("%7lld -> %7lld  label %2d  %-8s %s\n", static_cast<long long>(d.candidate.query_index),
+                  static_cast<long long>(d.candidate.match_index), row->label, core::toString(d.kind),
+                  d.verdict.detail.c_str());
+  }
+
+  void takeSnapshot(size_t k) {
+    std::vector<core::Pose> est;
+    for (const core::TrajectoryPoint& p : verifier_.trajectory()) est.push_back(p.estimate);
+    const std::string base = o_.out_dir + "/snapshots/";
+    const std::string suffix = "_" + std::to_string(k) + ".tum";
+    snapshots_ok_ = snapshots_ok_ && writeTum(base + "verified" + suffix, stamps_, est) &&
+                    writeTum(base + "loop_fusion_verified" + suffix, stamps_, verifier_.solveLikeLoopFusion(5).poses) &&
+                    writeTum(base + "loop_fusion_accept_all" + suffix, stamps_, accept_all_.solveLikeLoopFusion(5).poses);
+  }
+
+  /// verdicts.csv; a candidate still held when the run ends is not confirmed.
+  void writeRows() {
+    for (Row& r : rows_) {
+      if (!r.verdict.deferred) continue;
+      r.verdict.deferred = false;
+      r.verdict.reason = core::Reason::kUnconfirmed;
+      r.verdict.detail = "still held when the run ended (" + r.verdict.detail + ")";
+      r.decision = "drop";
+      r.decided_at = keyframes_held_;
+    }
+    for (const Row& r : rows_) {
+      if (r.label == 1) (r.verdict.accepted ? tp_ : fn_)++;
+      if (r.label == 0) (r.verdict.accepted ? fp_ : tn_)++;
+      std::fprintf(csv_, "%s,%zu,%zu,%zu\n",
+                   core::verdictCsvRow(r.verdict, r.query_stamp, r.match_stamp, r.inliers, "rover_replay", r.decision)
+                       .c_str(),
+                   r.verified_at, r.decided_at, r.group_first_at);
+    }
+  }
+
+  bool writeTrajectories() {
+    std::vector<core::Pose> estimate;
+    for (const core::TrajectoryPoint& p : verifier_.trajectory()) estimate.push_back(p.estimate);
+    const std::string& out = o_.out_dir;
+    bool ok = writeTum(out + "/odometry.tum", stamps_, odometry_) && writeTum(out + "/verified.tum", stamps_, estimate) &&
+              writeTum(out + "/loop_fusion_verified.tum", stamps_, verifier_.solveLikeLoopFusion(5).poses) &&
+              writeTum(out + "/loop_fusion_accept_all.tum", stamps_, accept_all_.solveLikeLoopFusion(5).poses);
+    if (s_.truth.empty()) return ok;
     std::vector<double> gt_stamps;
     std::vector<core::Pose> gt;
-    for (size_t i = 0; i < s.truth.size(); ++i) {
-      if (!stamp_of.count(s.truth_index[i])) continue;
-      gt_stamps.push_back(stamp_of[s.truth_index[i]]);
-      gt.push_back(s.truth[i]);
+    for (size_t i = 0; i < s_.truth.size(); ++i) {
+      if (!stamp_of_.count(s_.truth_index[i])) continue;
+      gt_stamps.push_back(stamp_of_[s_.truth_index[i]]);
+      gt.push_back(s_.truth[i]);
     }
-    ok = ok && writeTum(out_dir + "/groundtruth.tum", gt_stamps, gt);
+    return ok && writeTum(out + "/groundtruth.tum", gt_stamps, gt);
   }
-  ok = ok && snapshots_ok;
-  if (!ok) {
-    std::fprintf(stderr, "rover_replay: cannot write trajectories to %s\n", out_dir.c_str());
+
+  void printSummary() const {
+    std::printf("rover_replay: %zu keyframes (%d refused), %zu candidates, protocol %s, threshold %.2f m\n",
+                stamps_.size(), refused_keyframes_, verified_, o_.protocol.c_str(), o_.cfg.metric.threshold);
+    if (oracle_refused_ > 0)
+      std::printf("rover_replay: %d true candidates not committed by the oracle (the same loop again)\n",
+                  oracle_refused_);
+    if (tp_ + fp_ + tn_ + fn_ > 0)
+      std::printf("rover_replay: TP %d FP %d TN %d FN %d  precision %s recall %s\n", tp_, fp_, tn_, fn_,
+                  sim::ratioText(tp_, tp_ + fp_).c_str(), sim::ratioText(tp_, tp_ + fn_).c_str());
+    const double max_ms =
+        add_keyframe_ms_.empty() ? 0.0 : *std::max_element(add_keyframe_ms_.begin(), add_keyframe_ms_.end());
+    std::printf("rover_replay: mean verification %.3f ms; addKeyframe p50 %.3f ms, p99 %.3f ms, max %.3f ms; "
+                "output in %s\n",
+                verified_ ? verify_ms_ / verified_ : 0.0, percentileOf(add_keyframe_ms_, 50),
+                percentileOf(add_keyframe_ms_, 99), max_ms, o_.out_dir.c_str());
+  }
+
+  const Options& o_;
+  const sim::Scenario& s_;
+  core::Verifier verifier_;
+  core::KeyframeGraph accept_all_;  // loop_fusion's graph with every candidate
+  std::FILE *csv_ = nullptr, *keyframe_csv_ = nullptr, *intake_csv_ = nullptr, *trials_csv_ = nullptr;
+  std::multimap<int64_t, size_t> by_query_;  // query keyframe -> candidates still to verify
+  std::map<int64_t, int> upcoming_;          // keyframe indices still to come (how often)
+  std::map<int64_t, const Eigen::Matrix4d*> step_covariance_;
+  std::map<int64_t, double> stamp_of_;
+  std::vector<Row> rows_;
+  // The rows open for a later decision, by (query, match), oldest first (the same loop may be
+  // proposed again while held: the verifier decides each copy, in the order they came): held
+  // ones for their release or drop, accepted ones for a revocation.
+  std::map<Key, std::deque<size_t>> held_rows_, accepted_rows_;
+  std::map<Key, size_t> last_row_;  // every candidate's latest row
+  int tp_ = 0, fp_ = 0, tn_ = 0, fn_ = 0, refused_keyframes_ = 0, oracle_refused_ = 0;
+  size_t verified_ = 0, keyframes_held_ = 0, handled_keyframes_ = 0, next_snapshot_ = 1;
+  double verify_ms_ = 0.0;
+  bool snapshots_ok_ = true;
+  std::vector<double> stamps_, add_keyframe_ms_;
+  std::vector<core::Pose> odometry_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  const int status = parseArguments(argc, argv, &o);
+  if (status >= 0) return status;
+  if (!o.quiet)
+    std::printf("rover_replay: %s; relocalisation: %s (accept_without_prior %s, confirm_without_prior %s)\n",
+                core::describe(o.cfg).c_str(), o.relocalisation.empty() ? "set by flags" : o.relocalisation.c_str(),
+                o.cfg.host.accept_without_prior ? "true" : "false", o.cfg.host.confirm_without_prior ? "true" : "false");
+  sim::Scenario s;
+  std::string error;
+  if (!sim::loadScenario(o.scenario_dir, &s, &error)) {
+    std::fprintf(stderr, "rover_replay: %s\n", error.c_str());
     return 1;
   }
-  std::printf("rover_replay: %zu keyframes (%d refused), %zu candidates, protocol %s, threshold %.2f m\n",
-              stamps.size(), refused_keyframes, verified, protocol.c_str(), cfg.metric.threshold);
-  if (oracle_refused > 0)
-    std::printf("rover_replay: %d true candidates not committed by the oracle (the same loop again)\n", oracle_refused);
-  if (tp + fp + tn + fn > 0)
-    std::printf("rover_replay: TP %d FP %d TN %d FN %d  precision %s recall %s\n", tp, fp, tn, fn,
-                sim::ratioText(tp, tp + fp).c_str(), sim::ratioText(tp, tp + fn).c_str());
-  std::printf("rover_replay: mean verification %.3f ms; addKeyframe p50 %.3f ms, p99 %.3f ms, max %.3f ms; "
-              "output in %s\n",
-              verified ? verify_ms / verified : 0.0, percentileOf(add_keyframe_ms, 50), percentileOf(add_keyframe_ms, 99),
-              add_keyframe_ms.empty() ? 0.0 : *std::max_element(add_keyframe_ms.begin(), add_keyframe_ms.end()),
-              out_dir.c_str());
-  return 0;
+  makeDirs(o.out_dir);
+  return Replay(o, s).run();
 }
