@@ -16,9 +16,11 @@
 // service (rover_loop_fusion/Optimize), which also returns them.
 //
 // Robustness: a candidate that arrives before its keyframes waits up to ~candidate_timeout
-// seconds (indexed by the keyframe it waits for: each message costs O(log n) however many
-// wait); then, or when it names keyframes that never came or were refused, it gets an
-// invalid_input verdict with a ROS_WARN. Keyframes are checked by the verifier's own rules
+// seconds from its own arrival (indexed by the keyframe it waits for: each message costs
+// O(log n) however many wait); then, or when it names keyframes that never came or were
+// refused, it gets an invalid_input verdict with a ROS_WARN. Keyframe stamps need not increase
+// (stamped late, a clock that steps back), so no stamp counts as passed: a candidate naming a
+// stamp no keyframe has yet always waits its timeout. Stamps are written sec.nsec in messages. Keyframes are checked by the verifier's own rules
 // (the core's keyframe intake, with the plausibility limits of the verifier's namespace:
 // max_keyframe_jump, max_stamp_jump, jump_confirmations), so the node and the verifier keep the
 // same keyframes: malformed ones (NaN, non-unit quaternion, a repeated message, out-of-order
