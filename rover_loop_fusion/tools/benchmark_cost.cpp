@@ -205,8 +205,8 @@ const char* kVerdictsHeader =
     "dof,keyframes,span,lap,query_index,match_index,is_true,offset_m,accepted,reason,score,threshold,"
     "innovation,path_length,iterations,window,solve_ms,verify_ms\n";
 
-/// Builds one graph, measures its spans, and appends its rows (runs in a child process).
-int runGraph(const Options& o, const GraphPlan& p) {
+/// The laps scene of a graph plan: odometry only (the candidates are made as it is measured).
+sim::Scene graphScene(const Options& o, const GraphPlan& p) {
   sim::LapsOptions lo;
   lo.step = 0.5;
   const double perimeter = p.lap * lo.step;
@@ -220,71 +220,79 @@ int runGraph(const Options& o, const GraphPlan& p) {
   lo.seed = o.seed;
   sim::Scene s = sim::makeLapsScene(lo);
   s.keyframes.resize(std::min<size_t>(s.keyframes.size(), p.keyframes));
-  const int n = static_cast<int>(s.keyframes.size());
-  const int measure_from = n - o.queries;
+  return s;
+}
 
-  core::VerifierConfig cfg = o.config;
-  cfg.mode = p.mode;
-  std::vector<core::LoopCandidate> committed;
+/// What one graph's verifier measured.
+struct GraphRun {
+  std::vector<core::LoopCandidate> committed;  // the graph's own loops, as built
   std::vector<Measured> results;
-  sim::Gaussian g(o.seed + 1000u * static_cast<uint32_t>(p.lap));
-  const int loop_every = std::max(5, p.lap / 10);
   int commits_cut = 0;  // refused, or the estimate's update stopped by the budget (under load)
   double verifier_rss = 0;
-  std::vector<double> commit_ms;  // the graph's own loops, as built
-  core::LoopCandidate last_true;  // query_index -1: none
+  std::vector<double> commit_ms;  // the graph's own loops' commits
   double last_commit_ms = -1;     // after the measurements: the longest span's last true candidate
-  {
-    core::Verifier v(cfg);
-    for (int k = 0; k < n; ++k) {
-      const sim::SimKeyframe& kf = s.keyframes[k];
-      const core::Status added = v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q);
-      if (!added) {
-        std::fprintf(stderr, "keyframe %d refused: %s\n", k, added.message.c_str());
-        return 1;
-      }
-      double offset;
-      if (k < measure_from) {
-        if (k >= p.lap && k % loop_every == 0) {
-          const core::LoopCandidate c = makeCandidate(o, kf, s.keyframes[k - p.lap], g, true, &offset);
-          const auto t0 = Clock::now();
-          const core::Status st = v.commit(c);
-          commit_ms.push_back(msSince(t0));
-          if (!st || st.warning()) ++commits_cut;
-          if (st) committed.push_back(c);
-        }
-        continue;
-      }
-      for (int span : p.spans) {
-        for (bool is_true : {true, false}) {
-          const core::LoopCandidate c = makeCandidate(o, kf, s.keyframes[k - span], g, is_true, &offset);
-          const auto t0 = Clock::now();
-          const core::Verdict vd = v.verify(c);
-          const double ms = msSince(t0);
-          results.push_back(Measured{span, is_true, offset, vd, ms});
-          if (is_true && span == p.spans.back()) last_true = c;
-        }
-      }
+};
+
+/// Builds the graph in a verifier (a true loop every lap / 10 keyframes) and verifies a true and
+/// a false candidate per span at each of the last o.queries keyframes; false if a keyframe is refused.
+bool measureGraph(const Options& o, const GraphPlan& p, const sim::Scene& s, const core::VerifierConfig& cfg,
+                  GraphRun* run) {
+  const int n = static_cast<int>(s.keyframes.size());
+  const int measure_from = n - o.queries;
+  sim::Gaussian g(o.seed + 1000u * static_cast<uint32_t>(p.lap));
+  const int loop_every = std::max(5, p.lap / 10);
+  core::LoopCandidate last_true;  // query_index -1: none
+  core::Verifier v(cfg);
+  for (int k = 0; k < n; ++k) {
+    const sim::SimKeyframe& kf = s.keyframes[k];
+    const core::Status added = v.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q);
+    if (!added) {
+      std::fprintf(stderr, "keyframe %d refused: %s\n", k, added.message.c_str());
+      return false;
     }
-    verifier_rss = peakRssMb();
-    // What a commit costs when a loop ties the newest keyframe to the run's start (the update
-    // of the estimate every decision rule keeps; chi2's re-places the keyframes of every chain
-    // whose ends moved): measured once, after everything else.
-    if (last_true.query_index >= 0) {
-      const auto t0 = Clock::now();
-      if (v.commit(last_true)) last_commit_ms = msSince(t0);
+    double offset;
+    if (k < measure_from) {
+      if (k >= p.lap && k % loop_every == 0) {
+        const core::LoopCandidate c = makeCandidate(o, kf, s.keyframes[k - p.lap], g, true, &offset);
+        const auto t0 = Clock::now();
+        const core::Status st = v.commit(c);
+        run->commit_ms.push_back(msSince(t0));
+        if (!st || st.warning()) ++run->commits_cut;
+        if (st) run->committed.push_back(c);
+      }
+      continue;
+    }
+    for (int span : p.spans) {
+      for (bool is_true : {true, false}) {
+        const core::LoopCandidate c = makeCandidate(o, kf, s.keyframes[k - span], g, is_true, &offset);
+        const auto t0 = Clock::now();
+        const core::Verdict vd = v.verify(c);
+        const double ms = msSince(t0);
+        run->results.push_back(Measured{span, is_true, offset, vd, ms});
+        if (is_true && span == p.spans.back()) last_true = c;
+      }
     }
   }
-  if (commits_cut > 0)
-    std::fprintf(stderr, "note: %d-DoF %d keyframes, lap %d: %d of the graph's loop commits were refused or their "
-                 "update of the estimate was cut by the time budget\n", dofOf(p.mode), n, p.lap, commits_cut);
+  run->verifier_rss = peakRssMb();
+  // What a commit costs when a loop ties the newest keyframe to the run's start (the update
+  // of the estimate every decision rule keeps; chi2's re-places the keyframes of every chain
+  // whose ends moved): measured once, after everything else.
+  if (last_true.query_index >= 0) {
+    const auto t0 = Clock::now();
+    if (v.commit(last_true)) run->last_commit_ms = msSince(t0);
+  }
+  return true;
+}
 
-  // loop_fusion's stand-in: the same keyframes and loops, plus the last true candidate of the
-  // longest span (loop_fusion optimises after accepting a loop).
+/// loop_fusion's stand-in: the same keyframes and loops, plus the last true candidate of the
+/// longest span (loop_fusion optimises after accepting a loop); the median of o.full_repeats
+/// solves [ms] and the iterations of the last.
+std::pair<double, int> loopFusionFull(const Options& o, const GraphPlan& p, const sim::Scene& s,
+                                      const core::VerifierConfig& cfg, const GraphRun& run) {
   core::KeyframeGraph lf(cfg);
   for (const sim::SimKeyframe& kf : s.keyframes) lf.addKeyframe(kf.index, kf.stamp, 1, kf.vio.t, kf.vio.q);
-  for (const core::LoopCandidate& c : committed) lf.addLoop(c);
-  for (auto it = results.rbegin(); it != results.rend(); ++it) {
+  for (const core::LoopCandidate& c : run.committed) lf.addLoop(c);
+  for (auto it = run.results.rbegin(); it != run.results.rend(); ++it) {
     if (it->is_true && it->span == p.spans.back()) {
       const sim::SimKeyframe& q = s.keyframes[it->verdict.query_index];
       const sim::SimKeyframe& m = s.keyframes[it->verdict.match_index];
@@ -301,34 +309,46 @@ int runGraph(const Options& o, const GraphPlan& p) {
     full_iterations = b.iterations;
     if (!b.ok) std::fprintf(stderr, "loop_fusion's solve failed: %s\n", b.message.c_str());
   }
-  const double full = percentile(full_ms, 50);
-  const double peak_rss = peakRssMb();
+  return std::make_pair(percentile(full_ms, 50), full_iterations);
+}
 
+/// One span's figures.
+struct SpanFigures {
+  std::vector<double> ms, iters, windows;
+  int cand = 0, t = 0, f = 0, n_tested = 0, gated = 0, deferred = 0, invalid = 0, t_acc = 0, f_acc = 0, tbe = 0;
+  int over = 0, it_max = 0;
+
+  void add(const Measured& m, double time_budget_ms) {
+    const core::Verdict& vd = m.verdict;
+    ++cand;
+    ms.push_back(m.ms);
+    (m.is_true ? t : f) += 1;
+    if (vd.accepted) (m.is_true ? t_acc : f_acc) += 1;
+    if (vd.reason == core::Reason::kTimeBudgetExceeded) ++tbe;
+    if (time_budget_ms > 0 && m.ms > time_budget_ms) ++over;
+    if (vd.reason == core::Reason::kInnovationAboveBound) ++gated;
+    if (vd.reason == core::Reason::kInvalidInput) ++invalid;
+    if (vd.reason == core::Reason::kDeferred) ++deferred;
+    if (tested(vd.reason)) {
+      ++n_tested;
+      iters.push_back(vd.iterations);
+      it_max = std::max(it_max, vd.iterations);
+      if (vd.window_size > 0) windows.push_back(vd.window_size);
+    }
+  }
+};
+
+/// Prints and appends the rows of one graph (its spans' figures and, with --verdicts, every verdict).
+void report(const Options& o, const GraphPlan& p, int n, const core::VerifierConfig& cfg, const GraphRun& run,
+            double full, int full_iterations, double peak_rss) {
   FILE* csv = o.csv.empty() ? nullptr : std::fopen(o.csv.c_str(), "a");
   FILE* vcsv = o.verdicts.empty() ? nullptr : std::fopen(o.verdicts.c_str(), "a");
   for (int span : p.spans) {
-    std::vector<double> ms, iters, windows;
-    int cand = 0, t = 0, f = 0, n_tested = 0, gated = 0, deferred = 0, invalid = 0, t_acc = 0, f_acc = 0, tbe = 0;
-    int over = 0;
-    int it_max = 0;
-    for (const Measured& m : results) {
+    SpanFigures x;
+    for (const Measured& m : run.results) {
       if (m.span != span) continue;
+      x.add(m, cfg.trial.time_budget_ms);
       const core::Verdict& vd = m.verdict;
-      ++cand;
-      ms.push_back(m.ms);
-      (m.is_true ? t : f) += 1;
-      if (vd.accepted) (m.is_true ? t_acc : f_acc) += 1;
-      if (vd.reason == core::Reason::kTimeBudgetExceeded) ++tbe;
-      if (cfg.trial.time_budget_ms > 0 && m.ms > cfg.trial.time_budget_ms) ++over;
-      if (vd.reason == core::Reason::kInnovationAboveBound) ++gated;
-      if (vd.reason == core::Reason::kInvalidInput) ++invalid;
-      if (vd.reason == core::Reason::kDeferred) ++deferred;
-      if (tested(vd.reason)) {
-        ++n_tested;
-        iters.push_back(vd.iterations);
-        it_max = std::max(it_max, vd.iterations);
-        if (vd.window_size > 0) windows.push_back(vd.window_size);
-      }
       if (vcsv)
         std::fprintf(vcsv, "%d,%d,%d,%d,%lld,%lld,%d,%.3f,%d,%s,%.6f,%.6f,%.6f,%.3f,%d,%d,%.4f,%.4f\n",
                      dofOf(p.mode), n, span, p.lap, static_cast<long long>(vd.query_index),
@@ -336,30 +356,45 @@ int runGraph(const Options& o, const GraphPlan& p) {
                      core::toString(vd.reason), vd.score, vd.threshold, vd.innovation, vd.path_length,
                      vd.iterations, vd.window_size, vd.solve_ms, m.ms);
     }
-    const double p50 = percentile(ms, 50), p90 = percentile(ms, 90), p99 = percentile(ms, 99),
-                 mx = percentile(ms, 100);
-    const int window = windows.empty() ? 0 : static_cast<int>(percentile(windows, 50));
-    const int it_med = iters.empty() ? 0 : static_cast<int>(percentile(iters, 50));
+    const double p50 = percentile(x.ms, 50), p90 = percentile(x.ms, 90), p99 = percentile(x.ms, 99),
+                 mx = percentile(x.ms, 100);
+    const int window = x.windows.empty() ? 0 : static_cast<int>(percentile(x.windows, 50));
+    const int it_med = x.iters.empty() ? 0 : static_cast<int>(percentile(x.iters, 50));
     std::printf("%3d %9d %5d %7d %4d %6d %5d %3d/%-3d %3d/%-3d %4d %4d %5d %9.3f %9.3f %9.3f %11.1f %8.1f %8.1f %13.1f %12.1f\n",
-                dofOf(p.mode), n, span, window, cand, n_tested, gated, t_acc, t, f_acc, f, tbe, over, it_med, p50, p99, mx,
-                full, full / p50, full / p99, verifier_rss, peak_rss);
+                dofOf(p.mode), n, span, window, x.cand, x.n_tested, x.gated, x.t_acc, x.t, x.f_acc, x.f, x.tbe, x.over,
+                it_med, p50, p99, mx, full, full / p50, full / p99, run.verifier_rss, peak_rss);
     if (csv)
       std::fprintf(csv, "%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%d,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%.3f,%.3f,%.1f,%d,%.1f,%.1f\n",
-                   dofOf(p.mode), n, span, p.lap, window, cand, t, f, n_tested, gated, deferred, invalid, t_acc, f_acc, tbe, over,
-                   it_med, it_max, p50, p90, p99, mx, full, full_iterations, full / p50, full / p99,
-                   cfg.trial.time_budget_ms, commits_cut, verifier_rss, peak_rss);
+                   dofOf(p.mode), n, span, p.lap, window, x.cand, x.t, x.f, x.n_tested, x.gated, x.deferred, x.invalid,
+                   x.t_acc, x.f_acc, x.tbe, x.over, it_med, x.it_max, p50, p90, p99, mx, full, full_iterations,
+                   full / p50, full / p99, cfg.trial.time_budget_ms, run.commits_cut, run.verifier_rss, peak_rss);
   }
-  if (!commit_ms.empty()) {
+  if (!run.commit_ms.empty()) {
     char last[64] = "refused";
-    if (last_commit_ms >= 0) std::snprintf(last, sizeof(last), "%.3f ms", last_commit_ms);
+    if (run.last_commit_ms >= 0) std::snprintf(last, sizeof(last), "%.3f ms", run.last_commit_ms);
     std::printf("    commits while building the graph: %zu, p50 %.3f ms, p99 %.3f ms, max %.3f ms; the last true "
                 "candidate of span %d committed after the measurements: %s\n",
-                commit_ms.size(), percentile(commit_ms, 50), percentile(commit_ms, 99), percentile(commit_ms, 100),
-                p.spans.back(), last);
+                run.commit_ms.size(), percentile(run.commit_ms, 50), percentile(run.commit_ms, 99),
+                percentile(run.commit_ms, 100), p.spans.back(), last);
   }
   std::fflush(stdout);
   if (csv) std::fclose(csv);
   if (vcsv) std::fclose(vcsv);
+}
+
+/// Builds one graph, measures its spans, and appends its rows (runs in a child process).
+int runGraph(const Options& o, const GraphPlan& p) {
+  const sim::Scene s = graphScene(o, p);
+  const int n = static_cast<int>(s.keyframes.size());
+  core::VerifierConfig cfg = o.config;
+  cfg.mode = p.mode;
+  GraphRun run;
+  if (!measureGraph(o, p, s, cfg, &run)) return 1;
+  if (run.commits_cut > 0)
+    std::fprintf(stderr, "note: %d-DoF %d keyframes, lap %d: %d of the graph's loop commits were refused or their "
+                 "update of the estimate was cut by the time budget\n", dofOf(p.mode), n, p.lap, run.commits_cut);
+  const std::pair<double, int> full = loopFusionFull(o, p, s, cfg, run);
+  report(o, p, n, cfg, run, full.first, full.second, peakRssMb());
   return 0;
 }
 
@@ -372,10 +407,9 @@ int usage() {
   return 2;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  Options o;
+/// Parses the command line into *o; returns -1 to run, or the exit status.
+int parseArguments(int argc, char** argv, Options* o_out) {
+  Options& o = *o_out;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--quick") {
@@ -452,6 +486,15 @@ int main(int argc, char** argv) {
       return usage();
     }
   }
+  return -1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  const int parsed = parseArguments(argc, argv, &o);
+  if (parsed >= 0) return parsed;
   const std::string bad = o.config.validate();
   if (!bad.empty()) {
     std::fprintf(stderr, "%s\n", bad.c_str());

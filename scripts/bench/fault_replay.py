@@ -6,12 +6,15 @@ results/fault_replay/ (summary.txt, clean/ and faulty/ verdict logs and node out
   scripts/bench/fault_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 40]
                                 [--sigma 0.03] [--seed 3] [--out results/fault_replay]
 
-The faulty run has, at fifths of the run (roverlib.faults):
+The faulty run has, at eighths of the run (roverlib.faults):
   - one keyframe stamped 1000 s late;
+  - two keyframes in a row stamped 1000 s late;
   - a stretch of 50 keyframes whose clock stands still (every stamp the first one's);
+  - a second such stretch with one keyframe in it stamped 1000 s late (a stop with a glitch);
   - one keyframe never sent;
-  - a burst: 300 keyframes and their candidates published at once, with the node's queue_size
-    at 10 (raised to the node's minimum, 1000, with a warning);
+  - a repeated burst: 300 keyframes and their candidates published at once, each of those
+    candidates sent 3 times, with the node's queue_size at 10 (raised to the node's minimum,
+    1000, with a warning);
   - a full-disk episode: the verdict log on a small tmpfs that a filler file fills while 10 %
     of the candidates are decided, then frees (needs root to mount the tmpfs; skipped with
     the reason otherwise).
@@ -19,7 +22,10 @@ Candidates name their keyframes by stamp, as loop_fusion's are recorded; those t
 keyframe of the stopped stretch by stamp are invalid (a stamp several keyframes carry names
 none). Reported per run: verdicts received on ~loop_verdicts (one final per candidate?), true
 and false loops accepted, recall; for the log: rows, whole rows, header, rows the node counted
-lost. The figure to read: the faulty run's recall beside the clean run's.
+lost. Both runs also go through rover_replay (the scenario as sent). True and false loops are
+counted by candidate pair. The figure to read: the faulty run's recall beside the clean run's,
+in both hosts; the exit status is 1 unless every candidate got one final verdict, the log is
+whole and the faulty recall is within 0.02 of the clean one in both hosts.
 
 Needs the package built and sourced (scripts/test.sh or scripts/demo.sh do that); runs its own
 roscore on a free port."""
@@ -37,6 +43,8 @@ import time
 from roverlib import bag as rbag
 from roverlib import bench, faults, programs
 
+REPEATS = 3  # copies of each candidate of the repeated burst
+
 long_replay = programs.load("bench/long_replay.py")  # the corridor scene and a free port, as long_replay has them
 add_scene_args, corridor_scene, free_port = long_replay.add_scene_args, long_replay.corridor_scene, long_replay.free_port
 
@@ -44,17 +52,49 @@ add_scene_args, corridor_scene, free_port = long_replay.add_scene_args, long_rep
 def make_runs(a):
     s = corridor_scene(a)
     n = len(s.keyframes)
-    fifth = n // 5
+    e = n // 8
     clean = faults.inject_all(s, "clean", [])
     faulty = faults.inject_all(s, "faulty", [
-        faults.late(fifth, 1000.0),
-        faults.frozen_stretch(2 * fifth, 50),
-        faults.deleted(3 * fifth),
-        faults.burst(4 * fifth, 300),
-    ])
-    what = (f"keyframe {fifth} stamped 1000 s late; keyframes {2 * fifth}..{2 * fifth + 49} with one stamp; "
-            f"keyframe {3 * fifth} never sent; keyframes {4 * fifth}..{4 * fifth + 299} and their candidates at once")
+        faults.late(e, 1000.0),
+        faults.late(2 * e, 1000.0), faults.late(2 * e + 1, 1000.0),
+        faults.frozen_stretch(3 * e, 50),
+        faults.frozen_stretch(4 * e, 50), faults.late(4 * e + 25, 1000.0),
+        faults.deleted(5 * e),
+        faults.burst(6 * e, 300),
+    ], repeats=(6 * e, 6 * e + 300, REPEATS))
+    what = (f"keyframe {e} stamped 1000 s late; keyframes {2 * e} and {2 * e + 1} stamped 1000 s late; "
+            f"keyframes {3 * e}..{3 * e + 49} with one stamp; keyframes {4 * e}..{4 * e + 49} with one stamp and "
+            f"keyframe {4 * e + 25} among them stamped 1000 s late; keyframe {5 * e} never sent; keyframes "
+            f"{6 * e}..{6 * e + 299} and their candidates at once, each of those candidates sent {REPEATS} times")
     return s, clean, faulty, what
+
+
+def figures(run, finals, n_cand, labels):
+    """Recall and false loops by candidate pair: copies of one candidate count once."""
+    accepted = {(q, m) for q, m, ok in finals if ok}
+    true_pairs = {k for k, lab in labels.items() if lab == 1}
+    tp = len(accepted & true_pairs)
+    fp = sum(1 for k in accepted if labels.get(k) == 0)
+    return dict(run=run, verdicts=len(finals), candidates=n_cand, tp=tp, fp=fp, n_true=len(true_pairs),
+                recall=tp / len(true_pairs) if true_pairs else float("nan"))
+
+
+def run_replay(run, f, out_dir):
+    """rover_replay on the run's scenario (keyframes.csv as sent); a dict of figures."""
+    scen = os.path.join(out_dir, "scenario")
+    faults.write(f, scen)
+    t0 = time.time()
+    bench.replay(scen, os.path.join(out_dir, "replay"))
+    with open(os.path.join(out_dir, "replay", "verdicts.csv"), newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    labels = {(c.query, c.match): c.label for c in f.scenario.candidates}
+    r = figures(run, [(int(x["query_index"]), int(x["match_index"]), x["accepted"] == "1") for x in rows],
+                len(f.scenario.candidates), labels)
+    r["wall"] = time.time() - t0
+    r["reasons"] = {}
+    for x in rows:
+        r["reasons"][x["reason"]] = r["reasons"].get(x["reason"], 0) + 1
+    return r
 
 
 class DiskEpisode:
@@ -172,18 +212,16 @@ def run_node(a, run, name, messages, labels, n_cand, env, out_dir, queue_size, d
         finals = list(client.verdicts)
         held = sum(len(h) for h in client.pending.values())
         n_msgs = len(client.messages)
-    tp = sum(1 for v in finals if v.accepted and labels.get((v.query_index, v.match_index)) == 1)
-    fp = sum(1 for v in finals if v.accepted and labels.get((v.query_index, v.match_index)) == 0)
-    n_true = sum(1 for lab in labels.values() if lab == 1)
+    r = figures(run, [(v.query_index, v.match_index, v.accepted) for v in finals], n_cand, labels)
     text = open(os.path.join(out_dir, "node.txt")).read()
     lost = re.findall(r"(\d+) of (\d+) verdict rows were not written", text)
     reasons = {}
     for v in finals:
         reasons[v.reason] = reasons.get(v.reason, 0) + 1
-    return dict(run=run, verdicts=len(finals), held=held, messages=n_msgs, candidates=n_cand, tp=tp, fp=fp, n_true=n_true,
-                recall=tp / n_true if n_true else float("nan"), wall=wall, rows=rows, whole=whole, header=header,
-                lost=f"{lost[-1][0]} of {lost[-1][1]}" if lost else "none reported",
-                reasons=reasons, raised="raised to" in text and "queue_size" in text)
+    r.update(held=held, messages=n_msgs, wall=wall, rows=rows, whole=whole, header=header,
+             lost=f"{lost[-1][0]} of {lost[-1][1]}" if lost else "none reported",
+             reasons=reasons, raised="raised to" in text and "queue_size" in text)
+    return r
 
 
 def main(argv=None):
@@ -225,6 +263,13 @@ def main(argv=None):
         os.killpg(core.pid, signal.SIGINT)
         core.wait(timeout=30)
 
+    replays = []
+    for run, fr in (("clean", clean), ("faulty", faulty)):
+        r = run_replay(run, fr, os.path.join(a.out, run))
+        replays.append(r)
+        print(f"rover_replay {run}: {r['verdicts']} verdicts of {r['candidates']} candidates in {r['wall']:.0f} s",
+              flush=True)
+
     c, f = results
     lines = [f"fault replay: corridor sigma {a.sigma:g} seed {a.seed}, {len(s.keyframes)} keyframes, "
              f"{len(s.candidates)} candidates, rosbag play -r {a.rate:g}, shipped indoor YAML",
@@ -239,11 +284,22 @@ def main(argv=None):
         lines.append("          reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(r["reasons"].items())))
     lines.append(f"  recall faulty - clean: {f['recall'] - c['recall']:+.3f}; queue_size 10 raised with a warning: "
                  f"{'yes' if f['raised'] else 'no'}")
+    lines.append("  rover_replay on the same runs (keyframes.csv as sent; no burst, disk or queue there):")
+    lines.append("  run     verdicts/candidates  true acc  false acc  recall")
+    for r in replays:
+        lines.append(f"  {r['run']:7s} {r['verdicts']:>6d}/{r['candidates']:<6d}        {r['tp']:>5d}/{r['n_true']:<5d}"
+                     f"  {r['fp']:>5d}    {r['recall']:.3f}")
+        lines.append("          reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(r["reasons"].items())))
+    rc, rf = replays
+    lines.append(f"  recall faulty - clean: {rf['recall'] - rc['recall']:+.3f}")
+    lines.append("  (true and false loops counted by candidate pair: the copies of a candidate count once)")
     text = "\n".join(lines)
     print(text)
     with open(os.path.join(a.out, "summary.txt"), "w") as out:
         out.write(text + "\n")
     ok = all(r["verdicts"] + r["held"] == r["candidates"] and r["rows"] == r["whole"] and r["header"] for r in results)
+    ok = ok and all(r["verdicts"] == r["candidates"] for r in replays)
+    ok = ok and f["recall"] >= c["recall"] - 0.02 and rf["recall"] >= rc["recall"] - 0.02
     return 0 if ok else 1
 
 
