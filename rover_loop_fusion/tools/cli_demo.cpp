@@ -31,11 +31,15 @@ std::vector<core::Pose> estimates(const core::Verifier& v) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
-  sim::LapsOptions opt;
-  core::VerifierConfig cfg;
-  std::string scene = "corridor";
-  bool quiet = false;
+namespace {
+
+/// Parses the command line; returns -1 to run, or the exit status.
+int parseArguments(int argc, char** argv, sim::LapsOptions* opt_out, core::VerifierConfig* cfg_out, std::string* scene_out,
+                   bool* quiet_out) {
+  sim::LapsOptions& opt = *opt_out;
+  core::VerifierConfig& cfg = *cfg_out;
+  std::string& scene = *scene_out;
+  bool& quiet = *quiet_out;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> const char* {
@@ -72,6 +76,40 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  return -1;
+}
+
+/// The summary: decisions against the labels and the ATE of each trajectory.
+void printSummary(const sim::Scene& s, const core::VerifierConfig& cfg, int tp, int fp, int tn, int fn,
+                  core::Verifier& verifier, core::KeyframeGraph& accept_all) {
+  std::vector<core::Pose> truth, odom;
+  for (const sim::SimKeyframe& kf : s.keyframes) {
+    truth.push_back(kf.truth);
+    odom.push_back(kf.vio);
+  }
+  const core::BatchSolveResult lf_all = accept_all.solveLikeLoopFusion(5);
+  const core::BatchSolveResult lf_verified = verifier.solveLikeLoopFusion(5);
+  std::printf("\nsummary: %d candidates (%d true, %d false): accepted %d, rejected %d\n",
+              tp + fp + tn + fn, tp + fn, fp + tn, tp + fp, tn + fn);
+  std::printf("  true positives %d, false positives %d, true negatives %d, false negatives %d\n", tp,
+              fp, tn, fn);
+  std::printf("  precision %s, recall %s (threshold %.2f m)\n", sim::ratioText(tp, tp + fp).c_str(),
+              sim::ratioText(tp, tp + fn).c_str(), cfg.metric.threshold);
+  std::printf("  ATE [m]: odometry %.3f | accept-all (loop_fusion) %.3f | verified (loop_fusion) %.3f | verifier estimate %.3f\n",
+              sim::ate(odom, truth), sim::ate(lf_all.poses, truth), sim::ate(lf_verified.poses, truth),
+              sim::ate(estimates(verifier), truth));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  sim::LapsOptions opt;
+  core::VerifierConfig cfg;
+  std::string scene = "corridor";
+  bool quiet = false;
+  const int parsed = parseArguments(argc, argv, &opt, &cfg, &scene, &quiet);
+  if (parsed >= 0) return parsed;
+
   const sim::Scene s = sim::makeLapsScene(opt);
   core::Verifier verifier(cfg);
   core::KeyframeGraph accept_all(cfg);  // what loop_fusion does without us: every candidate is used
@@ -107,21 +145,6 @@ int main(int argc, char** argv) {
     }
   }
 
-  std::vector<core::Pose> truth, odom;
-  for (const sim::SimKeyframe& kf : s.keyframes) {
-    truth.push_back(kf.truth);
-    odom.push_back(kf.vio);
-  }
-  const core::BatchSolveResult lf_all = accept_all.solveLikeLoopFusion(5);
-  const core::BatchSolveResult lf_verified = verifier.solveLikeLoopFusion(5);
-  std::printf("\nsummary: %d candidates (%d true, %d false): accepted %d, rejected %d\n",
-              tp + fp + tn + fn, tp + fn, fp + tn, tp + fp, tn + fn);
-  std::printf("  true positives %d, false positives %d, true negatives %d, false negatives %d\n", tp,
-              fp, tn, fn);
-  std::printf("  precision %s, recall %s (threshold %.2f m)\n", sim::ratioText(tp, tp + fp).c_str(),
-              sim::ratioText(tp, tp + fn).c_str(), cfg.metric.threshold);
-  std::printf("  ATE [m]: odometry %.3f | accept-all (loop_fusion) %.3f | verified (loop_fusion) %.3f | verifier estimate %.3f\n",
-              sim::ate(odom, truth), sim::ate(lf_all.poses, truth), sim::ate(lf_verified.poses, truth),
-              sim::ate(estimates(verifier), truth));
+  printSummary(s, cfg, tp, fp, tn, fn, verifier, accept_all);
   return 0;
 }
