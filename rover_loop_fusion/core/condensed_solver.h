@@ -221,6 +221,43 @@ class BlockLdlt {
   Blocks<B> D_inv_;  // D's blocks, inverted
 };
 
+/// Edge ed's linearisation *L reweighted by its Huber loss (IRLS); its cost (the Huber loss's
+/// where it applies) added to *cost.
+template <class Edge, class Linearisation>
+void huberReweight(const Edge& ed, Linearisation* L, double* cost) {
+  const double chi2 = L->r.squaredNorm();
+  *cost += chi2;
+  if (ed.huber <= 0) return;
+  // the Huber loss's rho'(s) = delta / sqrt(s) beyond delta^2
+  const int count = std::max(1, ed.count);
+  const double s = chi2 / count;
+  if (s > ed.huber * ed.huber) {
+    *cost += count * (2.0 * ed.huber * std::sqrt(s) - ed.huber * ed.huber) - chi2;
+    const double w = std::sqrt(ed.huber / std::sqrt(s));
+    L->r *= w;
+    L->Ja *= w;
+    L->Jb *= w;
+  }
+}
+
+/// The gradient of the weighted edges at the current states (and, with H, the normal matrix
+/// added edge by edge); their cost added to *cost. `weighted(e, cost)`: edge e's linearisation.
+template <int B, class Edge, class Weighted>
+Eigen::VectorXd gradientPass(const std::vector<Edge>& edges, const std::vector<int>& col, int n, Weighted& weighted,
+                             NormalMatrix<B>* H, double* cost) {
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(B * n);
+  for (size_t e = 0; e < edges.size(); ++e) {
+    const auto L = weighted(e, cost);
+    const Edge& ed = edges[e];
+    const Eigen::Matrix<double, B, B>* J[2] = {&L.Ja, &L.Jb};
+    const int c[2] = {col[ed.from], col[ed.to]};
+    for (int u = 0; u < 2; ++u)
+      if (c[u] >= 0) g.template segment<B>(B * c[u]) += J[u]->transpose() * L.r;
+    if (H) H->add(e, L.Ja, L.Jb);
+  }
+  return g;
+}
+
 /// Gauss-Newton on the free anchors (`fixed`: held), robust edges (`huber` > 0: Ceres' HuberLoss
 /// of that scale on the chi-square of each of the edge's `count` measurements) by iteratively
 /// reweighted least squares. `linearise(e)` gives edge e's residual `r` and Jacobians `Ja`, `Jb`
@@ -255,20 +292,7 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
   // Huber loss's where it applies) added to *cost.
   auto weighted = [&](size_t e, double* cost) {
     auto L = linearise(e);  // r, Ja, Jb: Eigen fixed-size (B) vector and matrices
-    const Edge& ed = edges[e];
-    const double chi2 = L.r.squaredNorm();
-    *cost += chi2;
-    if (ed.huber > 0) {  // IRLS: the Huber loss's rho'(s) = delta / sqrt(s) beyond delta^2
-      const int count = std::max(1, ed.count);
-      const double s = chi2 / count;
-      if (s > ed.huber * ed.huber) {
-        *cost += count * (2.0 * ed.huber * std::sqrt(s) - ed.huber * ed.huber) - chi2;
-        const double w = std::sqrt(ed.huber / std::sqrt(s));
-        L.r *= w;
-        L.Ja *= w;
-        L.Jb *= w;
-      }
-    }
+    huberReweight(edges[e], &L, cost);
     return L;
   };
   // The matrix at the current states, when a chord step was tried and not taken: the same
@@ -286,17 +310,8 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
     // gradient alone; the matrix only if the chord step is not taken (assemble()).
     const bool assembled = refactor;
     if (assembled) H.setZero();
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(B * n);
     double cost = 0.0;
-    for (size_t e = 0; e < edges.size(); ++e) {
-      const auto L = weighted(e, &cost);
-      const Edge& ed = edges[e];
-      const Eigen::Matrix<double, B, B>* J[2] = {&L.Ja, &L.Jb};
-      const int c[2] = {col[ed.from], col[ed.to]};
-      for (int u = 0; u < 2; ++u)
-        if (c[u] >= 0) g.template segment<B>(B * c[u]) += J[u]->transpose() * L.r;
-      if (assembled) H.add(e, L.Ja, L.Jb);
-    }
+    const Eigen::VectorXd g = gradientPass<B>(edges, col, n, weighted, assembled ? &H : nullptr, &cost);
     if (function_tolerance > 0 && previous_cost >= 0 &&
         std::abs(previous_cost - cost) <= function_tolerance * previous_cost) {
       if (converged) *converged = true;
@@ -318,10 +333,8 @@ int gaussNewton(const std::vector<Edge>& edges, const std::vector<bool>& fixed, 
         return it;
       }
       ldlt.solveInPlace(dx);
-      if (!dx.allFinite()) {
-        *ok = false;
-        return it;
-      }
+      *ok = dx.allFinite();
+      if (!*ok) return it;
     }
     for (size_t i = 0; i < fixed.size(); ++i)
       if (col[i] >= 0) step(i, dx.template segment<B>(B * col[i]));

@@ -41,6 +41,33 @@ constexpr double kCondensedTolerance = 1e-6;
 /// (CondensedGraph::solve's chord): the robust loops' reweighting converges linearly anyway,
 /// and a whole-run trial factorises once or twice instead of four or five times.
 constexpr double kTrialChord = 0.5;
+/// A condensed trial's solution: the solved anchors from the window's head on, and its summary
+/// (all but the time).
+void condensedSolution(size_t head, int component, const std::vector<size_t>& anchors,
+                       const std::vector<KeyframeState>& solved, int iterations, bool converged, size_t window,
+                       size_t edges, TrialSolution* out) {
+  out->condensed = true;
+  out->first = head;
+  out->component = component;
+  out->positions.clear();
+  out->states.clear();
+  for (size_t i = 0; i < anchors.size(); ++i) {
+    if (anchors[i] < head) continue;  // held fixed outside the window
+    out->positions.push_back(anchors[i]);
+    out->states.push_back(solved[i]);
+  }
+  SolveSummary& o = out->summary;
+  o.iterations = iterations;
+  o.converged = converged;
+  o.finite = true;
+  for (const KeyframeState& st : out->states)
+    if (!std::isfinite(st.t[0] + st.t[1] + st.t[2] + st.yaw + st.q[0] + st.q[1] + st.q[2] + st.q[3])) o.finite = false;
+  std::ostringstream msg;
+  msg << "condensed trial of " << window << " keyframes: " << anchors.size() << " anchors, " << edges
+      << " edges; scored on evenly spaced keyframes";
+  o.message = msg.str();
+}
+
 }  // namespace
 
 // ---- the condensed graph of a component ------------------------------------------------
@@ -327,27 +354,8 @@ bool KeyframeGraph::Impl::solveCondensed(size_t first, int component, const std:
     if (!built) return false;
   }
   if (!ok) return false;
-  out->condensed = true;
-  out->first = head;
-  out->component = component;
-  out->positions.clear();
-  out->states.clear();
-  for (size_t i = 0; i < anchors.size(); ++i) {
-    if (anchors[i] < head) continue;  // held fixed outside the window
-    out->positions.push_back(anchors[i]);
-    out->states.push_back(solved[i]);
-  }
-  SolveSummary& o = out->summary;
-  o.iterations = iterations;
-  o.converged = converged;
-  o.finite = true;
-  for (const KeyframeState& st : out->states)
-    if (!std::isfinite(st.t[0] + st.t[1] + st.t[2] + st.yaw + st.q[0] + st.q[1] + st.q[2] + st.q[3])) o.finite = false;
-  std::ostringstream msg;
-  msg << "condensed trial of " << kfs.size() - head << " keyframes: " << anchors.size() << " anchors, " << edges
-      << " edges; scored on evenly spaced keyframes";
-  o.message = msg.str();
-  o.solve_ms = msSince(t0);
+  condensedSolution(head, component, anchors, solved, iterations, converged, kfs.size() - head, edges, out);
+  out->summary.solve_ms = msSince(t0);
   return true;
 }
 

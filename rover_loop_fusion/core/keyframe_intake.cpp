@@ -42,10 +42,11 @@ std::string KeyframeGraph::Impl::implausibleStep(const Keyframe& a, const Keyfra
   return s.str();
 }
 
-Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
-                              const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance) {
-  Impl& m = *impl_;
-  const std::string who = "keyframe " + describeIndex(index) + ": ";
+namespace {
+
+/// The checks of a keyframe by itself: index, sequence, a finite and plausible pose, a unit quaternion.
+Status checkKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t, const Eigen::Quaterniond& q,
+                     double quaternion_tolerance, const std::string& who) {
   if (index < 0) return Status::Error(who + "negative index");
   if (sequence < 0) return Status::Error(who + "negative sequence");
   if (!t.allFinite()) return Status::Error(who + "position is not finite");
@@ -56,7 +57,20 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     return Status::Error(s.str());
   }
   if (!std::isfinite(stamp)) return Status::Error(who + "stamp is not finite");
-  if (!unitQuaternion(q, config_.input.quaternion_tolerance)) return Status::Error(who + "orientation is not a unit quaternion");
+  if (!unitQuaternion(q, quaternion_tolerance)) return Status::Error(who + "orientation is not a unit quaternion");
+  return Status::Ok();
+}
+
+bool samePose(const Pose& a, const Pose& b) { return a.t == b.t && a.q.coeffs() == b.q.coeffs(); }
+
+}  // namespace
+
+Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, const Eigen::Vector3d& t,
+                              const Eigen::Quaterniond& q, const Eigen::Matrix4d* step_covariance) {
+  Impl& m = *impl_;
+  const std::string who = "keyframe " + describeIndex(index) + ": ";
+  const Status checked = checkKeyframe(index, stamp, sequence, t, q, config_.input.quaternion_tolerance, who);
+  if (!checked) return checked;
   const Impl::Keyframe* prev = nullptr;  // the previous keyframe of this sequence
   if (!m.kfs.empty()) {
     const Impl::Keyframe& last = m.kfs.back();
@@ -99,159 +113,181 @@ Status KeyframeGraph::addKeyframe(int64_t index, double stamp, int sequence, con
     // Three stamp faults are told apart from a jump first (one stamp policy for every host):
     // a repeated message, a clock that stopped, and keyframes stamped late.
     std::string implausible = m.implausibleStep(*prev, kf);
-    bool still_stopped = false;  // stamped like the keyframe before a late one: the clock is still stopped
-    const bool step_ok = (kf.vio.t - prev->vio.t).norm() <= config_.input.max_keyframe_jump;
-    if (!implausible.empty() && step_ok && stamp == prev->stamp) {
-      const bool same_pose = kf.vio.t == prev->vio.t && kf.vio.q.coeffs() == prev->vio.q.coeffs();
-      if (same_pose)
-        return Status::Error(who + "duplicate: a repeat of keyframe " + describeIndex(prev->index) +
-                             " (same stamp, same pose): refused");
-      // The clock stopped (a stalled driver): the pose still moves plausibly. Stamps only name
-      // keyframes here, so it is kept; never taken as a new clock.
-      implausible.clear();
-      if (!m.clock_stopped) {
-        std::ostringstream w;
-        w.precision(17);
-        w << who << "stamp " << stamp << " equal to the previous keyframe's (" << describeIndex(prev->index)
-          << "): the clock stopped advancing; kept, as every keyframe after it with that stamp and a plausible pose "
-             "(said once; a host that names keyframes by stamp cannot tell them apart)";
-        status = Status::Warning(w.str());
-      }
-      m.clock_stopped = true;
-    } else if (!implausible.empty() && step_ok && stamp < prev->stamp && m.kfs.size() >= 2) {
-      // Stamped before the previous keyframe but plausibly after an earlier one, and every
-      // keyframe between them stamped after it: their stamps were the wrong ones (messages
-      // stamped late, up to jump_confirmations - 1 in a row; as many in a row had the evidence
-      // of a new clock, and coming back from it needs the same; more than one only when their
-      // stamps stand out). Kept; the late keyframes keep
-      // their stamps as their names. The earlier keyframe may carry this stamp when the clock
-      // stopped (a stamp frozen, and one message of the stretch stamped late).
-      const size_t last = m.kfs.size() - 1;
-      const int most = std::max(1, config_.input.jump_confirmations - 1);
-      for (int late = 1; late <= most && static_cast<size_t>(late) <= last; ++late) {
-        const Impl::Keyframe& late_kf = m.kfs[last - late + 1];
-        const Impl::Keyframe& before = m.kfs[last - late];
-        if (late_kf.sequence != sequence || late_kf.segment != prev->segment || !(late_kf.stamp > stamp)) break;
-        if (before.sequence != sequence || before.segment != prev->segment) break;
-        if (before.stamp > stamp) continue;  // late too: look further back
-        const bool stopped = before.stamp == stamp &&
-                             (kf.vio.t - before.vio.t).norm() <= config_.input.max_keyframe_jump &&
-                             !(kf.vio.t == before.vio.t && kf.vio.q.coeffs() == before.vio.q.coeffs());
-        if (!stopped && !m.implausibleStep(before, kf).empty()) break;
-        if (late >= 2) {
-          // Several wrong stamps explain a keyframe only when they stand out: each further ahead
-          // of it than it is after the keyframe before them (two messages stamped 1000 s late).
-          // Otherwise the new keyframe's stamp is the wrong one (stamped between two earlier
-          // keyframes): refused.
-          double ahead = std::numeric_limits<double>::infinity();
-          for (size_t p = last - late + 1; p <= last; ++p) ahead = std::min(ahead, m.kfs[p].stamp - stamp);
-          if (!(ahead > stamp - before.stamp)) break;
-        }
-        std::ostringstream w;
-        w.precision(17);
-        const std::string first = describeIndex(m.kfs[last - late + 1].index), newest = describeIndex(prev->index);
-        const std::string named = late == 1 ? "keyframe " + newest : "keyframes " + first + " .. " + newest;
-        w << who << "stamp " << stamp << " before keyframe " << newest << "'s (" << prev->stamp << ") but "
-          << (stopped ? "equal to" : "plausibly after") << " keyframe " << describeIndex(before.index) << "'s ("
-          << before.stamp << (stopped ? ", the clock stopped" : "") << "): " << named << "'s "
-          << (late == 1 ? "stamp was" : "stamps were") << " wrong (stamped late); kept";
-        status = Status::Warning(w.str());
-        implausible.clear();
-        still_stopped = stopped;
-        break;
-      }
-    }
-    if (still_stopped) m.clock_stopped = true;
-    else if (implausible.empty() && stamp != prev->stamp) m.clock_stopped = false;
-    if (!implausible.empty()) {
-      Impl::Suspect& sp = m.suspect;
-      const bool follows = sp.run > 0 && sp.keyframe.sequence == sequence &&
-                           m.implausibleStep(sp.keyframe, kf).empty();
-      const int run = follows ? sp.run + 1 : 1;
-      if (run < config_.input.jump_confirmations) {
-        sp.run = run;
-        sp.keyframe = kf;
-        const int more = config_.input.jump_confirmations - run;
-        return Status::Error(who + implausible + ": refused; " + std::to_string(more) + " more consecutive " +
-                             (more == 1 ? "keyframe" : "keyframes") +
-                             " consistent with it would be taken as a relocation (jump_confirmations)");
-      }
-      const bool relocated = !step_ok;
-      // The keyframes before the jump are the first of their sequence and fewer than the run
-      // that agrees with each other and not with them (one bad first pose, or a few that agree
-      // with each other): the run outvotes them (the first poses of a session need the same
-      // evidence as any jump). They are discredited, and the sequence goes on from the run.
-      const size_t prev_pos = m.kfs.size() - 1;
-      size_t first_pos = prev_pos;
-      while (first_pos > 0 && m.kfs[first_pos - 1].sequence == sequence) --first_pos;
-      const size_t before_jump = prev_pos - first_pos + 1;
-      bool lone_first = relocated && before_jump < static_cast<size_t>(run);
-      for (size_t p = first_pos; lone_first && p <= prev_pos; ++p)
-        if (m.kfs[p].segment != prev->segment || m.loop_ends.count(p) != 0 || m.discredited.count(p) != 0)
-          lone_first = false;
-      if (relocated) kf.segment = m.next_segment--;
-      const std::string bad = before_jump == 1 ? "keyframe " + describeIndex(m.kfs[first_pos].index)
-                                               : "keyframes " + describeIndex(m.kfs[first_pos].index) + " .. " +
-                                                     describeIndex(m.kfs[prev_pos].index);
-      if (lone_first) {
-        std::ostringstream why;
-        why << run << " keyframes after " << (before_jump == 1 ? "it" : "them") << " agree with each other and not with "
-            << (before_jump == 1 ? "it" : "them") << " (" << implausible << "): "
-            << (before_jump == 1 ? "a bad first pose" : "bad first poses") << " of sequence " << sequence;
-        for (size_t p = first_pos; p <= prev_pos; ++p) m.discredited[p] = why.str();
-      }
-      m.clock_stopped = false;
-      status = Status::Warning(
-          who + implausible + ": accepted after " + std::to_string(run) + " consecutive keyframes agreed (" +
-          (lone_first ? bad + ", the first of sequence " +
-                            std::to_string(sequence) + (before_jump == 1 ? ", is discredited: a bad first pose; loops "
-                                                                           "that name it are refused"
-                                                                         : ", are discredited: bad first poses; loops "
-                                                                           "that name them are refused") +
-                            ", and sequence " + std::to_string(sequence) + " goes on from here"
-           : relocated ? "the VIO relocated: a new segment of sequence " + std::to_string(sequence) +
-                             " starts here, without odometry to the keyframes before; loops across the jump "
-                             "have no trajectory prior until one ties the two"
-                       : "a new clock") +
-          ")");
-    }
+    if (m.stampFaults(kf, *prev, who, &implausible, &status)) return status;
+    if (!implausible.empty() && m.confirmJump(kf, *prev, who, implausible, &status)) return status;
   }
   m.suspect.run = 0;
+  m.appendKeyframe(kf, prev, step_covariance, who, &status);
+  return status;
+}
 
+bool KeyframeGraph::Impl::stampFaults(const Keyframe& kf, const Keyframe& prev, const std::string& who,
+                                      std::string* implausible, Status* status) {
+  bool still_stopped = false;  // stamped like the keyframe before a late one: the clock is still stopped
+  const bool step_ok = (kf.vio.t - prev.vio.t).norm() <= cfg.input.max_keyframe_jump;
+  if (!implausible->empty() && step_ok && kf.stamp == prev.stamp) {
+    if (samePose(kf.vio, prev.vio)) {
+      *status = Status::Error(who + "duplicate: a repeat of keyframe " + describeIndex(prev.index) +
+                              " (same stamp, same pose): refused");
+      return true;
+    }
+    // The clock stopped (a stalled driver): the pose still moves plausibly. Stamps only name
+    // keyframes here, so it is kept; never taken as a new clock.
+    implausible->clear();
+    if (!clock_stopped) {
+      std::ostringstream w;
+      w.precision(17);
+      w << who << "stamp " << kf.stamp << " equal to the previous keyframe's (" << describeIndex(prev.index)
+        << "): the clock stopped advancing; kept, as every keyframe after it with that stamp and a plausible pose "
+           "(said once; a host that names keyframes by stamp cannot tell them apart)";
+      *status = Status::Warning(w.str());
+    }
+    clock_stopped = true;
+  } else if (!implausible->empty() && step_ok && kf.stamp < prev.stamp && kfs.size() >= 2) {
+    lateStamps(kf, prev, who, implausible, status, &still_stopped);
+  }
+  if (still_stopped) clock_stopped = true;
+  else if (implausible->empty() && kf.stamp != prev.stamp) clock_stopped = false;
+  return false;
+}
+
+void KeyframeGraph::Impl::lateStamps(const Keyframe& kf, const Keyframe& prev, const std::string& who,
+                                     std::string* implausible, Status* status, bool* still_stopped) {
+  // Stamped before the previous keyframe but plausibly after an earlier one, and every
+  // keyframe between them stamped after it: their stamps were the wrong ones (messages
+  // stamped late, up to jump_confirmations - 1 in a row; as many in a row had the evidence
+  // of a new clock, and coming back from it needs the same; more than one only when their
+  // stamps stand out). Kept; the late keyframes keep their stamps as their names. The earlier
+  // keyframe may carry this stamp when the clock stopped (a stamp frozen, and one message of
+  // the stretch stamped late).
+  const double stamp = kf.stamp;
+  const size_t last = kfs.size() - 1;
+  const int most = std::max(1, cfg.input.jump_confirmations - 1);
+  for (int late = 1; late <= most && static_cast<size_t>(late) <= last; ++late) {
+    const Keyframe& late_kf = kfs[last - late + 1];
+    const Keyframe& before = kfs[last - late];
+    if (late_kf.sequence != kf.sequence || late_kf.segment != prev.segment || !(late_kf.stamp > stamp)) break;
+    if (before.sequence != kf.sequence || before.segment != prev.segment) break;
+    if (before.stamp > stamp) continue;  // late too: look further back
+    const bool stopped = before.stamp == stamp &&
+                         (kf.vio.t - before.vio.t).norm() <= cfg.input.max_keyframe_jump &&
+                         !samePose(kf.vio, before.vio);
+    if (!stopped && !implausibleStep(before, kf).empty()) break;
+    if (late >= 2) {
+      // Several wrong stamps explain a keyframe only when they stand out: each further ahead
+      // of it than it is after the keyframe before them (two messages stamped 1000 s late).
+      // Otherwise the new keyframe's stamp is the wrong one (stamped between two earlier
+      // keyframes): refused.
+      double ahead = std::numeric_limits<double>::infinity();
+      for (size_t p = last - late + 1; p <= last; ++p) ahead = std::min(ahead, kfs[p].stamp - stamp);
+      if (!(ahead > stamp - before.stamp)) break;
+    }
+    std::ostringstream w;
+    w.precision(17);
+    const std::string first = describeIndex(kfs[last - late + 1].index), newest = describeIndex(prev.index);
+    const std::string named = late == 1 ? "keyframe " + newest : "keyframes " + first + " .. " + newest;
+    w << who << "stamp " << stamp << " before keyframe " << newest << "'s (" << prev.stamp << ") but "
+      << (stopped ? "equal to" : "plausibly after") << " keyframe " << describeIndex(before.index) << "'s ("
+      << before.stamp << (stopped ? ", the clock stopped" : "") << "): " << named << "'s "
+      << (late == 1 ? "stamp was" : "stamps were") << " wrong (stamped late); kept";
+    *status = Status::Warning(w.str());
+    implausible->clear();
+    *still_stopped = stopped;
+    break;
+  }
+}
+
+bool KeyframeGraph::Impl::confirmJump(Keyframe& kf, const Keyframe& prev, const std::string& who,
+                                      const std::string& implausible, Status* status) {
+  const int sequence = kf.sequence;
+  const bool follows = suspect.run > 0 && suspect.keyframe.sequence == sequence &&
+                       implausibleStep(suspect.keyframe, kf).empty();
+  const int run = follows ? suspect.run + 1 : 1;
+  if (run < cfg.input.jump_confirmations) {
+    suspect.run = run;
+    suspect.keyframe = kf;
+    const int more = cfg.input.jump_confirmations - run;
+    *status = Status::Error(who + implausible + ": refused; " + std::to_string(more) + " more consecutive " +
+                            (more == 1 ? "keyframe" : "keyframes") +
+                            " consistent with it would be taken as a relocation (jump_confirmations)");
+    return true;
+  }
+  const bool relocated = !((kf.vio.t - prev.vio.t).norm() <= cfg.input.max_keyframe_jump);
+  // The keyframes before the jump are the first of their sequence and fewer than the run
+  // that agrees with each other and not with them (one bad first pose, or a few that agree
+  // with each other): the run outvotes them (the first poses of a session need the same
+  // evidence as any jump). They are discredited, and the sequence goes on from the run.
+  const size_t prev_pos = kfs.size() - 1;
+  size_t first_pos = prev_pos;
+  while (first_pos > 0 && kfs[first_pos - 1].sequence == sequence) --first_pos;
+  const size_t before_jump = prev_pos - first_pos + 1;
+  bool lone_first = relocated && before_jump < static_cast<size_t>(run);
+  for (size_t p = first_pos; lone_first && p <= prev_pos; ++p)
+    if (kfs[p].segment != prev.segment || loop_ends.count(p) != 0 || discredited.count(p) != 0) lone_first = false;
+  if (relocated) kf.segment = next_segment--;
+  const std::string bad = before_jump == 1 ? "keyframe " + describeIndex(kfs[first_pos].index)
+                                           : "keyframes " + describeIndex(kfs[first_pos].index) + " .. " +
+                                                 describeIndex(kfs[prev_pos].index);
+  const std::string one = before_jump == 1 ? "it" : "them";
+  if (lone_first) {
+    std::ostringstream why;
+    why << run << " keyframes after " << one << " agree with each other and not with " << one << " ("
+        << implausible << "): " << (before_jump == 1 ? "a bad first pose" : "bad first poses") << " of sequence "
+        << sequence;
+    for (size_t p = first_pos; p <= prev_pos; ++p) discredited[p] = why.str();
+  }
+  clock_stopped = false;
+  const std::string seq = std::to_string(sequence);
+  const std::string what =
+      lone_first ? bad + ", the first of sequence " + seq +
+                       (before_jump == 1 ? ", is discredited: a bad first pose; loops that name it are refused"
+                                         : ", are discredited: bad first poses; loops that name them are refused") +
+                       ", and sequence " + seq + " goes on from here"
+      : relocated ? "the VIO relocated: a new segment of sequence " + seq +
+                        " starts here, without odometry to the keyframes before; loops across the jump have no "
+                        "trajectory prior until one ties the two"
+                  : "a new clock";
+  *status = Status::Warning(who + implausible + ": accepted after " + std::to_string(run) +
+                            " consecutive keyframes agreed (" + what + ")");
+  return false;
+}
+
+void KeyframeGraph::Impl::appendKeyframe(const Keyframe& kf, const Keyframe* prev,
+                                         const Eigen::Matrix4d* given_covariance, const std::string& who,
+                                         Status* status) {
   // X of the new keyframe: its VIO pose carried by the current drift correction of the
   // previous keyframe of the same sequence (loop_fusion's r_drift / t_drift).
-  KeyframeState s = m.stateFromPose(kf.vio);
-  const size_t pos = m.kfs.size();
+  KeyframeState s = stateFromPose(kf.vio);
+  const size_t pos = kfs.size();
   if (prev) {
-    const Correction drift = m.correctionBetween(m.stateFromPose(prev->vio), m.x.back(), *prev);
-    s = m.applyCorrection(drift, s, kf);
+    const Correction drift = correctionBetween(stateFromPose(prev->vio), x.back(), *prev);
+    s = applyCorrection(drift, s, kf);
   }
   const bool continues = prev && prev->segment == kf.segment;
-  m.arc.push_back(continues ? m.arc.back() + (kf.vio.t - prev->vio.t).norm() : 0.0);
-  m.kfs.push_back(kf);  // (prev is not used below: push_back may move it)
-  m.x.push_back(s);
-  m.root(kf.segment);
-  if (step_covariance) {
-    const Eigen::Matrix4d& C = *step_covariance;
+  arc.push_back(continues ? arc.back() + (kf.vio.t - prev->vio.t).norm() : 0.0);
+  kfs.push_back(kf);  // (prev is not used below: push_back may move it)
+  x.push_back(s);
+  root(kf.segment);
+  if (given_covariance) {
+    const Eigen::Matrix4d& C = *given_covariance;
     const Eigen::LLT<Eigen::Matrix4d> llt(0.5 * (C + C.transpose()));
     if (C.allFinite() && (C - C.transpose()).cwiseAbs().maxCoeff() <= 1e-9 * (1.0 + C.cwiseAbs().maxCoeff()) &&
         llt.info() == Eigen::Success) {
-      m.step_covariance[pos] = C;
+      step_covariance[pos] = C;
     } else {
       const std::string ignored = who + "its step covariance is not finite, symmetric and positive definite: the drift "
                                         "model's is used instead";
-      status = status.message.empty() ? Status::Warning(ignored) : Status::Warning(status.message + "; " + ignored);
+      *status = status->message.empty() ? Status::Warning(ignored) : Status::Warning(status->message + "; " + ignored);
     }
   }
-  m.extendChain(pos);
-  const int n = std::max(0, config_.trial.odometry_neighbours);
+  extendChain(pos);
+  const int n = std::max(0, cfg.trial.odometry_neighbours);
   for (int j = n; j >= 1; --j) {
     if (pos < static_cast<size_t>(j)) continue;
     const size_t from = pos - j;
-    if (m.kfs[from].segment != kf.segment) continue;
-    m.odometry.push_back(m.odometryEdge(from, pos));
+    if (kfs[from].segment != kf.segment) continue;
+    odometry.push_back(odometryEdge(from, pos));
   }
-  return status;
 }
 
 // ---- segments (union-find) ---------------------------------------------------------------

@@ -272,6 +272,24 @@ struct KeyframeGraph::Impl {
   /// Why keyframe b cannot follow keyframe a of its sequence (too far, stamp not after a's or
   /// too long after it); empty if it can.
   std::string implausibleStep(const Keyframe& a, const Keyframe& b) const;
+  /// The stamp faults of live keyframe kf after prev told apart from a jump: a repeated message
+  /// (an error in *status, true returned: refuse), a clock that stopped, keyframes stamped late
+  /// (kept, a warning in *status). Clears *implausible when one of them explains it.
+  bool stampFaults(const Keyframe& kf, const Keyframe& prev, const std::string& who, std::string* implausible,
+                   Status* status);
+  /// kf stamped before prev but plausibly after an earlier keyframe, the ones between stamped
+  /// late: a warning, *implausible cleared, *stopped when that keyframe carries kf's stamp.
+  void lateStamps(const Keyframe& kf, const Keyframe& prev, const std::string& who, std::string* implausible,
+                  Status* status, bool* stopped);
+  /// An implausible step from prev to kf: refused (an error, true returned) until
+  /// jump_confirmations consecutive keyframes agree, then accepted as a relocation (kf starts a
+  /// new segment), a new clock, or the discrediting of the sequence's first keyframes (a warning).
+  bool confirmJump(Keyframe& kf, const Keyframe& prev, const std::string& who, const std::string& implausible,
+                   Status* status);
+  /// Appends kf (checked) after prev (nullptr: the first of its sequence): its estimate, arc
+  /// length, step covariance (a bad one ignored, said in *status), chain and odometry edges.
+  void appendKeyframe(const Keyframe& kf, const Keyframe* prev, const Eigen::Matrix4d* given_covariance,
+                      const std::string& who, Status* status);
   int root(int segment);
   /// The segment root of the keyframe at `pos` (root() without path compression).
   int componentOf(size_t pos) const;

@@ -79,7 +79,50 @@ struct VerdictLog::State {
   /// Writes one record (the header or a row) whole or not at all: in a regular file a write
   /// that fails part-way is cut back to where the record began. 0 or the errno of the failure.
   int writeRecord(int fd, const std::string& data);
+  /// With the mutex held: opens the file if it is not open (a FIFO: once a reader came).
+  void tryOpen();
+  /// Without the mutex: the header (if `header`) and then the rows of a batch to fd; the
+  /// errno of the last failure (0: none), and *header_written, *written, *failed.
+  int writeBatch(int fd, bool header, const std::deque<std::string>& batch, bool* header_written, size_t* written,
+                 size_t* failed);
 };
+
+void VerdictLog::State::tryOpen() {
+  if (fd >= 0 || open_failed) return;
+  const int opened = openNonBlocking(path);
+  const int err = errno;
+  if (opened >= 0) {
+    fd = opened;
+    header_tried = false;
+    ROS_INFO("[rover] verdict log %s: a reader opened it, writing", path.c_str());
+  } else if (err != ENXIO) {
+    open_failed = true;
+    ROS_ERROR("[rover] verdict log %s cannot be opened (%s): verdict rows are lost from now on", path.c_str(),
+              std::strerror(err));
+  }
+}
+
+int VerdictLog::State::writeBatch(int to, bool header, const std::deque<std::string>& batch, bool* header_written,
+                                  size_t* written, size_t* failed) {
+  int err = 0;
+  // No row without the header before it: if it cannot be written (a full disk), the batch is
+  // lost and the header is tried again before the next one.
+  *header_written = to >= 0 && header && (err = writeRecord(to, this->header)) == 0;
+  for (const std::string& row : batch) {
+    if (to < 0 || (header && !*header_written) || err == EPIPE || err == ECANCELED) {
+      ++*failed;  // open failed, no header, the reader went away, or shutting down
+      continue;
+    }
+    const int e = writeRecord(to, row);
+    if (e == 0) {
+      ++*written;
+    } else {
+      ++*failed;
+      err = e;
+    }
+  }
+  return err;
+}
 
 int VerdictLog::State::writeRecord(int fd, const std::string& data) {
   const off_t start = regular_file ? ::lseek(fd, 0, SEEK_END) : static_cast<off_t>(-1);
@@ -193,19 +236,7 @@ void VerdictLog::writerLoop() {
   State& s = *state_;
   std::unique_lock<std::mutex> lock(s.mutex);
   while (true) {
-    if (s.fd < 0 && !s.open_failed) {
-      const int fd = openNonBlocking(s.path);
-      const int err = errno;
-      if (fd >= 0) {
-        s.fd = fd;
-        s.header_tried = false;
-        ROS_INFO("[rover] verdict log %s: a reader opened it, writing", s.path.c_str());
-      } else if (err != ENXIO) {
-        s.open_failed = true;
-        ROS_ERROR("[rover] verdict log %s cannot be opened (%s): verdict rows are lost from now on",
-                  s.path.c_str(), std::strerror(err));
-      }
-    }
+    s.tryOpen();
     const bool waiting_for_reader = s.fd < 0 && !s.open_failed;
     if (s.queue.empty() && s.header_pending && s.fd >= 0 && !s.header_tried) {
       // The header as soon as the file is open, so that a log of a run without verdicts is a
@@ -232,24 +263,9 @@ void VerdictLog::writerLoop() {
     const bool header = s.header_pending;
     lock.unlock();
 
-    int err = 0;
+    bool header_written = false;
     size_t written = 0, failed = 0;
-    // No row without the header before it: if it cannot be written (a full disk), the batch is
-    // lost and the header is tried again before the next one.
-    const bool header_written = fd >= 0 && header && (err = s.writeRecord(fd, s.header)) == 0;
-    for (const std::string& row : batch) {
-      if (fd < 0 || (header && !header_written) || err == EPIPE || err == ECANCELED) {
-        ++failed;  // open failed, no header, the reader went away, or shutting down
-        continue;
-      }
-      const int e = s.writeRecord(fd, row);
-      if (e == 0) {
-        ++written;
-      } else {
-        ++failed;
-        err = e;
-      }
-    }
+    const int err = s.writeBatch(fd, header, batch, &header_written, &written, &failed);
 
     lock.lock();
     if (header_written) s.header_pending = false;

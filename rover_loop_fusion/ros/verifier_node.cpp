@@ -85,7 +85,7 @@ VerifierNode::~VerifierNode() {
   ros::getGlobalCallbackQueue()->removeByID(reinterpret_cast<uint64_t>(this));
 }
 
-bool VerifierNode::start(std::string* error) {
+void VerifierNode::readParams() {
   VerifierNodeParams& p = params_;
   HostParamReader& r = host_.reader();
   r.text("keyframe_topic", &p.keyframe_topic, false);
@@ -116,6 +116,35 @@ bool VerifierNode::start(std::string* error) {
     if (!topic.second->empty() && !ros::names::validate(*topic.second, why))
       r.error(topic.first, "is not a valid topic name: " + why);
   }
+}
+
+void VerifierNode::connect() {
+  const VerifierNodeParams& p = params_;
+  odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
+  pose_graph_path_pub_ = pnh_.advertise<nav_msgs::Path>("pose_graph_path", 1, true);
+  estimate_path_pub_ = pnh_.advertise<nav_msgs::Path>("estimate_path", 1, true);
+  optimize_srv_ = pnh_.advertiseService("optimize", &VerifierNode::onOptimize, this);
+  ros::SubscribeOptions ko = ros::SubscribeOptions::create<nav_msgs::Odometry>(
+      p.keyframe_topic, p.queue_size,
+      [this](const nav_msgs::Odometry::ConstPtr& m) { receive(Incoming{m, nullptr}); }, ros::VoidPtr(),
+      &receive_queue_);
+  ros::SubscribeOptions co = ros::SubscribeOptions::create<LoopCandidate>(
+      p.candidate_topic, p.queue_size, [this](const LoopCandidate::ConstPtr& m) { receive(Incoming{nullptr, m}); },
+      ros::VoidPtr(), &receive_queue_);
+  keyframe_sub_ = nh_.subscribe(ko);
+  candidate_sub_ = nh_.subscribe(co);
+  receiver_.reset(new ros::AsyncSpinner(1, &receive_queue_));
+  receiver_->start();
+  pending_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &VerifierNode::onPendingTimer, this);
+  if (p.optimize_period > 0)
+    optimize_timer_ = nh_.createWallTimer(ros::WallDuration(p.optimize_period), &VerifierNode::onOptimizeTimer, this);
+  if (!ros::param::get("/run_id", run_id_)) run_id_.clear();
+  watchdog_timer_ = nh_.createWallTimer(ros::WallDuration(1.0), &VerifierNode::onWatchdog, this);
+}
+
+bool VerifierNode::start(std::string* error) {
+  readParams();
+  VerifierNodeParams& p = params_;
   HostInfo info;
   info.uses_imu = p.use_imu;
   info.shifts_sequences = false;  // raw VIO poses: the verifier anchors sequences itself
@@ -144,26 +173,7 @@ bool VerifierNode::start(std::string* error) {
   }
   graph_.reset(new core::KeyframeGraph(g));
 
-  odometry_path_pub_ = pnh_.advertise<nav_msgs::Path>("odometry_path", 1, true);
-  pose_graph_path_pub_ = pnh_.advertise<nav_msgs::Path>("pose_graph_path", 1, true);
-  estimate_path_pub_ = pnh_.advertise<nav_msgs::Path>("estimate_path", 1, true);
-  optimize_srv_ = pnh_.advertiseService("optimize", &VerifierNode::onOptimize, this);
-  ros::SubscribeOptions ko = ros::SubscribeOptions::create<nav_msgs::Odometry>(
-      p.keyframe_topic, p.queue_size,
-      [this](const nav_msgs::Odometry::ConstPtr& m) { receive(Incoming{m, nullptr}); }, ros::VoidPtr(),
-      &receive_queue_);
-  ros::SubscribeOptions co = ros::SubscribeOptions::create<LoopCandidate>(
-      p.candidate_topic, p.queue_size, [this](const LoopCandidate::ConstPtr& m) { receive(Incoming{nullptr, m}); },
-      ros::VoidPtr(), &receive_queue_);
-  keyframe_sub_ = nh_.subscribe(ko);
-  candidate_sub_ = nh_.subscribe(co);
-  receiver_.reset(new ros::AsyncSpinner(1, &receive_queue_));
-  receiver_->start();
-  pending_timer_ = nh_.createWallTimer(ros::WallDuration(0.1), &VerifierNode::onPendingTimer, this);
-  if (p.optimize_period > 0)
-    optimize_timer_ = nh_.createWallTimer(ros::WallDuration(p.optimize_period), &VerifierNode::onOptimizeTimer, this);
-  if (!ros::param::get("/run_id", run_id_)) run_id_.clear();
-  watchdog_timer_ = nh_.createWallTimer(ros::WallDuration(1.0), &VerifierNode::onWatchdog, this);
+  connect();
   ROS_INFO("[rover] %s: candidates from %s, keyframes from %s (sequence %d, %s); candidate_timeout %.3g s, "
            "stamp_tolerance %.3g s, optimize_period %.3g s, queue_size %d",
            ros::this_node::getName().c_str(), candidate_sub_.getTopic().c_str(), keyframe_sub_.getTopic().c_str(),

@@ -120,6 +120,10 @@ class VerifierNode {
   void drainInbox();
 
  private:
+  /// The node's own parameters (start()): read, checked, errors in the host's reader.
+  void readParams();
+  /// The paths, the ~optimize service, the subscriptions (on their own thread) and the timers.
+  void connect();
   typedef WaitingCandidates<LoopCandidate>::Wait WaitKey;
   enum class Resolution { kFound, kWait, kInvalid };
   /// A message as received: exactly one of the two is set, or neither for a keyframe that
