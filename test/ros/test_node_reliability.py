@@ -208,6 +208,12 @@ class NodeReliability(unittest.TestCase):
             kf, cand = publishers(node.name)
             kf.publish(keyframe(1.0, 0.0))
             kf.publish(keyframe(2.0, 0.5))
+            # Topics are not ordered with each other: the candidates go out once the node has
+            # both keyframes (else 1.0 -> 2.0 would name a match that has not arrived).
+            optimize = rospy.ServiceProxy(node.name + "/optimize", Optimize)
+            deadline = time.time() + 20.0
+            while optimize().keyframe_messages < 2 and time.time() < deadline:
+                time.sleep(0.05)
             cand.publish(candidate(2.0, 1.0, query_index=2**62, match_index=0, dx=0.5))
             cand.publish(candidate(1.0, 2.0, dx=-0.5))  # both arrived, the query is the older
             cand.publish(candidate(3.0, 4.0, dx=-0.5))  # neither yet; then only the query comes
