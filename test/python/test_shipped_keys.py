@@ -4,8 +4,8 @@ set changes a verdict when its value is changed substantially.
 A perturbation test. For every key of config/rover_template.yaml (judged at the template's
 values) and of each override (judged at template + override, the effective set of that host),
 rover_replay runs small scenes made from data/corridor with the key's value changed (numbers
-scaled by 1e-2, 1e2, 1e-4 and set to the ends of their range, booleans flipped, choices
-switched), and the test asserts that the verdicts (verdicts.csv: accepted, reason, score) of
+scaled by 1e-2, 1e2 and 1e-4, a zero set to fractions of its range, and the ends of the range;
+booleans flipped, choices switched), and the test asserts that the verdicts (verdicts.csv: accepted, reason, score) of
 some run differ from the unchanged run's. The scenes exercise what clean single-session input
 does not: a second session (sequence 2 from the second lap on: held candidates, the cycle test
 and its drift model) and bad input (a keyframe glitch, a relocation, a stamp far ahead, a
@@ -76,11 +76,6 @@ def perturbations(value, range_text):
         if w != v and w not in out:
             out.append(w)
     return [repr(w) if isinstance(w, float) else str(w) for w in out]
-
-
-def read_rows(path):
-    with open(path) as f:
-        return [line for line in f if not line.startswith("#")]
 
 
 def write_rows(path, header, rows):
