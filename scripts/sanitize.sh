@@ -81,6 +81,7 @@ tsan() {
     master=$!
     trap 'kill $master 2>/dev/null; wait $master 2>/dev/null || true' EXIT
     for _ in $(seq 100); do rosparam list > /dev/null 2>&1 && break; sleep 0.2; done
+    rosparam load "$ROOT/config/rover_template.yaml" /loop_fusion/rover  # the template, then the override
     rosparam load "$ROOT/config/rover_indoor.yaml" /loop_fusion/rover
     run_gtest adapter_stress_tsan "$WS/tsan_stress_run.log" \
       "$WS/devel_tsan/lib/rover_loop_fusion/rover_test_adapter_stress" __name:=loop_fusion

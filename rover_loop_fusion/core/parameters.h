@@ -4,8 +4,10 @@
 // (ros/params.cpp), rover_replay's flags and its --config file, describe() (logged at start-up)
 // and the test that the shipped YAMLs and the docs list every key.
 //
-// Adding a parameter: a field of VerifierConfig (core/types.h), one row in parameters.cpp, and a
-// commented line in each config/rover_*.yaml.
+// The rows are in parameter_table.cpp; the values, checks and parameter files in parameters.cpp.
+// Adding a parameter: a field of VerifierConfig (core/types.h), one row in parameter_table.cpp,
+// and a commented line in config/rover_template.yaml: a key, or "# name: default" in its last
+// block if it has no effect at the defaults (test/python/test_shipped_keys.py).
 #pragma once
 
 #include "rover_loop_fusion/core/types.h"
@@ -67,7 +69,7 @@ struct Parameter {
   std::string defaultText() const;
 };
 
-/// The table, in the order of the shipped YAMLs.
+/// The table, in the order of its rows (parameter_table.cpp).
 const std::vector<Parameter>& verifierParameters();
 /// The row of `name`; nullptr if none.
 const Parameter* findParameter(const std::string& name);

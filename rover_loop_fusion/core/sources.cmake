@@ -20,8 +20,10 @@ set(ROVER_CORE_SOURCES
   held_candidates.cpp
   cycle_test.cpp
   parameters.cpp
+  parameter_table.cpp
   verifier.cpp
   revocation.cpp
+  held_release.cpp
   global_release.cpp
   verdict_csv.cpp
 )

@@ -35,7 +35,7 @@ class ParamReader {
   std::vector<std::string>* errors_;
 };
 
-/// Reads every verifier parameter (the table of core/parameters.h; config/rover_indoor.yaml
+/// Reads every verifier parameter (the table of core/parameters.h; config/rover_template.yaml
 /// lists them) from `nh`'s namespace, falling back to the defaults for absent keys. A key with
 /// the wrong type or out of its range is an error that names the full parameter; a key that is
 /// not in the table is a warning (a typo?). `mode: auto` (the default) means 4-DoF when the host

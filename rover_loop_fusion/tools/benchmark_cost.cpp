@@ -32,7 +32,8 @@
 //       [--config FILE] [--set NAME=VALUE]... [--time-budget-ms 200] [--full-repeats 3]
 //       [--lap-max 1000] [--seed N] [--csv FILE] [--verdicts FILE]
 //   The verifier runs with VerifierConfig's defaults (the indoor YAML's values), then --config
-//   (a verifier YAML, e.g. config/rover_outdoor.yaml), then each --set (any parameter of
+//   (a verifier YAML; repeatable, applied in order: --config config/rover_template.yaml --config
+//   config/rover_outdoor.yaml), then each --set (any parameter of
 //   docs/ros-api.md; --time-budget-ms MS is --set time_budget_ms=MS); the mode is per graph.
 //   Two runs with the same seed and graph parameters see the same graphs and candidates
 //   whatever their time budget (nothing measured is committed; the graph's own loops are

@@ -9,9 +9,10 @@
 //
 // Verifier parameters: every row of the parameter table (core/parameters.h) is a flag
 // --<name> VALUE (a boolean flag alone means true); --config FILE reads a verifier YAML with
-// the same keys (config/rover_indoor.yaml, rover_outdoor.yaml, rover_paper.yaml). Both apply in
-// command-line order: flags after --config override it. Without either, the defaults of
-// core::VerifierConfig (those of config/rover_indoor.yaml). `mode: auto` is 4dof here
+// the same keys. Both apply in command-line order: flags after --config override it, and a
+// second --config overrides the first, so a shipped set is --config config/rover_template.yaml
+// --config config/rover_outdoor.yaml (the template, then the override: what the launch files
+// load). Without either, the defaults of core::VerifierConfig (config/rover_template.yaml's). `mode: auto` is 4dof here
 // (scenarios hold VIO poses). A value of the wrong type or out of range is an error (exit 2).
 // `rover_replay --help` lists every parameter with its unit, range and default.
 //
@@ -111,8 +112,9 @@ int usage(int code) {
                "Output: verdicts.csv (the verdict log's columns, then verified_at_keyframe,\n"
                "decided_at_keyframe, group_first_at_keyframe), keyframe_ms.csv (addKeyframe() time per\n"
                "keyframe), intake.csv (each keyframe kept or refused, and why), TUM trajectories.\n"
-               "verifier parameters (applied in order; --config FILE reads a verifier YAML such as\n"
-               "config/rover_indoor.yaml; the defaults are that file's; a boolean flag alone means true):\n");
+               "verifier parameters (applied in order; --config FILE reads a verifier YAML: a shipped set is\n"
+               "--config config/rover_template.yaml --config config/rover_outdoor.yaml, the template then\n"
+               "the override; the defaults are the template's; a boolean flag alone means true):\n");
   for (const core::Parameter& p : core::verifierParameters())
     std::fprintf(out, "  --%-26s %-22s default %-7s %s\n", p.name.c_str(), p.range().c_str(),
                  p.defaultText().c_str(), p.doc.c_str());

@@ -246,8 +246,9 @@ def main(argv=None):
     results = []
     try:
         time.sleep(3)
-        subprocess.run(["rosparam", "load", bench.config_path("indoor"), "/rover_clean/rover"], env=env, check=True)
-        subprocess.run(["rosparam", "load", bench.config_path("indoor"), "/rover_faulty/rover"], env=env, check=True)
+        for path in bench.config_paths("indoor"):  # the template, then the override
+            for ns in ("/rover_clean/rover", "/rover_faulty/rover"):
+                subprocess.run(["rosparam", "load", path, ns], env=env, check=True)
         import rospy
         rospy.init_node("fault_replay", disable_signals=True)
         for run, f, name, queue, d in (("clean", clean, "rover_clean", 100000, None),

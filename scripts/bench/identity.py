@@ -104,6 +104,10 @@ def replay_one(job):
     flags = list(entry["flags"])
     if config_dir:  # the YAMLs of another commit (a build that does not know today's keys)
         flags = [os.path.join(config_dir, os.path.basename(f)) if f.endswith(".yaml") else f for f in flags]
+        # A commit before the template (full YAMLs, config/rover_template.yaml absent): its file alone.
+        for i in range(len(flags) - 1, 0, -1):
+            if flags[i - 1] == "--config" and not os.path.exists(flags[i]) and flags[i].endswith("rover_template.yaml"):
+                del flags[i - 1:i + 1]
     cmd = [replay, "--scenario", entry["dir"], "--out", tmp, "--protocol", protocol, "--quiet"] + \
         flags + CONFIGS[config]
     env = dict(os.environ)

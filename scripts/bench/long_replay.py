@@ -6,7 +6,8 @@ writes results/long_replay/ (summary.txt, rss.csv, verdicts.csv).
 
   scripts/bench/long_replay.py [--keyframes 20000] [--true 500] [--false 500] [--rate 200]
                        [--sigma 0.03] [--seed 3] [--optimize-period 0] [--out results/long_replay]
-                       [--config config/rover_indoor.yaml] [--set decision=chi2 ...]
+                       [--config config/rover_template.yaml --config config/rover_indoor.yaml]
+                       [--set decision=chi2 ...]
 
 The scene is the corridor loop (120 keyframes a lap, odometry noise --sigma: 0.03 is a good
 VIO, whose first loop is accepted; at 0.05 some seeds lose it, docs/method.md) driven
@@ -94,11 +95,13 @@ def main(argv=None):
     ap.add_argument("--optimize-period", type=float, default=0.0,
                     help="node's loop_fusion-like optimisation period [s]; 0: only at the end")
     ap.add_argument("--out", default=os.path.join(bench.RESULTS, "long_replay"))
-    ap.add_argument("--config", default=bench.config_path("indoor"),
-                    help="verifier YAML loaded into the node's verifier namespace")
+    ap.add_argument("--config", action="append", metavar="FILE",
+                    help="verifier YAML loaded into the node's verifier namespace, in order; repeatable "
+                         "(default: config/rover_template.yaml then config/rover_indoor.yaml)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                     help="a verifier parameter set after --config (e.g. decision=chi2); repeatable")
     a = ap.parse_args(argv)
+    a.config = a.config or bench.config_paths("indoor")
     for o in a.overrides:
         if "=" not in o:
             ap.error(f"--set {o}: expected KEY=VALUE")
@@ -126,7 +129,8 @@ def main(argv=None):
                                 stderr=subprocess.DEVNULL, start_new_session=True)
         procs.append(core)
         time.sleep(3)
-        subprocess.run(["rosparam", "load", a.config, "/rover_verifier/rover"], env=env, check=True)
+        for path in a.config:
+            subprocess.run(["rosparam", "load", path, "/rover_verifier/rover"], env=env, check=True)
         for o in a.overrides:
             key, value = o.split("=", 1)
             subprocess.run(["rosparam", "set", f"/rover_verifier/rover/{key}", value], env=env, check=True)
@@ -186,8 +190,10 @@ def main(argv=None):
         if lab in by_label:
             by_label[lab][r["reason"]] = by_label[lab].get(r["reason"], 0) + 1
     # The verifier's time budget (the YAML's, or a --set): verifications that took longer.
-    with open(a.config) as f:
-        budget_ms = float((yaml.safe_load(f) or {}).get("time_budget_ms", 0.0))
+    budget_ms = 0.0
+    for path in a.config:  # later files win, as in the node's namespace
+        with open(path) as f:
+            budget_ms = float((yaml.safe_load(f) or {}).get("time_budget_ms", budget_ms))
     for o in a.overrides:
         key, value = o.split("=", 1)
         if key == "time_budget_ms":
@@ -203,7 +209,7 @@ def main(argv=None):
     lines = [
         f"long replay: corridor sigma {a.sigma:g} seed {a.seed}, {len(s.keyframes)} keyframes, {n_cand} candidates, rosbag play -r {a.rate:g} "
         f"(bag {len(s.keyframes) * 0.5 / a.rate:.0f} s), node optimize_period {a.optimize_period:g} s",
-        f"  verifier: {os.path.relpath(a.config, bench.ROOT)}" + "".join(f", {o}" for o in a.overrides),
+        f"  verifier: {' + '.join(os.path.relpath(p, bench.ROOT) for p in a.config)}" + "".join(f", {o}" for o in a.overrides),
         f"  verdicts: {len(rows)} of {n_cand} candidates ({n_cand - len(rows)} dropped); node "
         f"{'still running' if alive else 'EXITED'} after {wall:.0f} s",
         "  reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())),

@@ -13,7 +13,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 
-from . import metrics
+from . import config, metrics
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", ".."))  # the clone, not .ws/src
 TOOLS = os.path.join(os.environ.get("ROVER_WS", os.path.join(ROOT, ".ws")), "devel", "lib", "rover_loop_fusion")
@@ -191,27 +191,28 @@ def write_summary(rows, path):
 
 
 def shipped_config(environment):
-    """config/rover_<environment>.yaml (indoor, outdoor) as a dict."""
-    import yaml
-    with open(config_path(environment)) as f:
-        return yaml.safe_load(f)
+    """Every parameter `environment` ships with (config/rover_template.yaml, then
+    config/rover_<environment>.yaml: roverlib/config.py) as a dict."""
+    return config.effective(environment)
 
 
 def defaults(environment):
-    """The decision parameters of config/rover_<environment>.yaml as a dict, for tables and
-    titles (the runs themselves read the whole file: shipped())."""
+    """The decision parameters of `environment` as a dict, for tables and titles (the runs
+    themselves read the files: shipped())."""
     c = shipped_config(environment)
     return {k: float(c[k]) for k in DECISION_KEYS}
 
 
-def config_path(environment):
-    return os.path.join(ROOT, "config", f"rover_{environment}.yaml")
+def config_paths(environment):
+    """The files `environment` loads, in order: the template, then its override."""
+    return config.files(environment)
 
 
 def shipped(environment, *overrides):
-    """rover_replay flags that run the shipped configuration of `environment` (every parameter
-    of config/rover_<environment>.yaml), then `overrides` (flags after --config win)."""
-    return ["--config", config_path(environment)] + list(overrides)
+    """rover_replay flags that run the shipped configuration of `environment` (--config
+    TEMPLATE --config OVERRIDE), then `overrides` (later flags win). With --decision chi2 or
+    revisit among them, the override's opt-in keys for those decisions come first."""
+    return config.replay_args(environment) + config.opt_in_args(environment, overrides) + list(overrides)
 
 
 def tool(name):

@@ -15,7 +15,7 @@ A loop measurement (PnP on the matched keyframe) has its own, distance-independe
 `loop_sigma_t` per axis and `loop_sigma_yaw` (`loop_sigma_roll_pitch` in 6-DoF).
 
 One source: the shipped verifier YAMLs. INDOOR and OUTDOOR are read from
-config/rover_indoor.yaml and config/rover_outdoor.yaml (drift_xy, drift_z, drift_yaw_deg,
+config/rover_template.yaml with config/rover_indoor.yaml and rover_outdoor.yaml (drift_xy, drift_z, drift_yaw_deg,
 drift_min_step, loop_sigma, loop_sigma_yaw_deg: the C++ verifier's drift model, core/drift.h),
 so the peers (PCM, IPC, GNC, DCS) and the LM back end get the same model as ROVER. The YAMLs
 have no roll/pitch terms (the core's drift model is 4-DoF: x, y, z, yaw); those stay the
@@ -83,27 +83,23 @@ class DriftModel:
 # yaw rate chosen then; outdoor: the outdoor yaw rate chosen then).
 ROLL_PITCH = {"indoor": 0.004, "outdoor": 0.0025}
 LOOP_ROLL_PITCH = float(np.radians(0.5))  # rad: a loop's roll/pitch noise (6-DoF only)
-# The YAML keys of the model (config/rover_<environment>.yaml, "decision: chi2" block).
+# The YAML keys of the model (config/rover_template.yaml, "drift model" block; drift_z named there).
 YAML_KEYS = ("drift_xy", "drift_z", "drift_yaw_deg", "drift_min_step", "loop_sigma", "loop_sigma_yaw_deg")
 
 
-def config_path(environment):
-    import os
-    root = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), "..", ".."))
-    return os.path.join(root, "config", f"rover_{environment}.yaml")
-
-
 def from_yaml(environment, path=None):
-    """The drift model of config/rover_<environment>.yaml (or `path`): every number from the
-    YAML except roll/pitch (ROLL_PITCH, LOOP_ROLL_PITCH). A missing key is an error (the
-    shipped YAMLs document every parameter)."""
-    import yaml
-    path = path or config_path(environment)
-    with open(path) as f:
-        c = yaml.safe_load(f)
+    """The drift model `environment` ships with (config/rover_template.yaml, then
+    config/rover_<environment>.yaml: roverlib/config.py), or of the file `path` read in their
+    place (a key it lacks: the template's named default): every number from the YAMLs except
+    roll/pitch (ROLL_PITCH, LOOP_ROLL_PITCH). A missing key is an error."""
+    from . import config
+    if path is None:
+        c = config.effective(environment)
+    else:
+        c = dict(config.defaults(), **config.load(path))
     missing = [k for k in YAML_KEYS if k not in c]
     if missing:
-        raise ValueError(f"{path}: no {', '.join(missing)}: the drift model is read from there")
+        raise ValueError(f"{path or environment}: no {', '.join(missing)}: the drift model is read from there")
     return DriftModel(environment, sigma_xy=float(c["drift_xy"]), sigma_z=float(c["drift_z"]),
                       sigma_yaw=float(np.radians(float(c["drift_yaw_deg"]))),
                       sigma_roll_pitch=ROLL_PITCH[environment], loop_sigma_t=float(c["loop_sigma"]),
@@ -111,7 +107,7 @@ def from_yaml(environment, path=None):
                       loop_sigma_roll_pitch=LOOP_ROLL_PITCH, min_step=float(c["drift_min_step"]))
 
 
-# What config/rover_indoor.yaml and rover_outdoor.yaml say (read when roverlib is imported).
+# What the indoor and outdoor configurations say (read when roverlib is imported).
 INDOOR = from_yaml("indoor")
 OUTDOOR = from_yaml("outdoor")
 MODELS = {"indoor": INDOOR, "outdoor": OUTDOOR}
@@ -155,7 +151,7 @@ def main():
             print(f"{env:8s} {case.name:40s} sigma_xy {c['sigma_xy']:.4f}  sigma_z {c['sigma_z']:.4f}  "
                   f"sigma_yaw {c['sigma_yaw']:.5f} rad ({c['segments']} segments)")
         m = MODELS[env]
-        print(f"{env:8s} {'in use (' + config_path(env).split('/')[-1] + ')':40s} sigma_xy {m.sigma_xy:.4f}  "
+        print(f"{env:8s} {'in use (rover_template.yaml + rover_' + env + '.yaml)':40s} sigma_xy {m.sigma_xy:.4f}  "
               f"sigma_z {m.sigma_z:.4f}  sigma_yaw {m.sigma_yaw:.5f} rad; loop {m.loop_sigma_t:g} m, "
               f"{np.degrees(m.loop_sigma_yaw):g} deg; min step {m.min_step:g} m; roll/pitch {m.sigma_roll_pitch:g} rad "
               "(constant, 6-DoF)")

@@ -72,17 +72,17 @@ def test_the_drift_model_is_the_shipped_yamls():
     """One drift model. The peers' covariances come from the verifier YAMLs'
     drift_* and loop_sigma* (what ROVER's chi2 and revisit rules use), not from numbers of
     their own; a changed YAML changes the model."""
-    import yaml
+    from roverlib import config
     for env, m in drift_model.MODELS.items():
-        with open(drift_model.config_path(env)) as f:
-            c = yaml.safe_load(f)
+        c = config.effective(env)
         assert {k: pytest.approx(float(c[k])) for k in drift_model.YAML_KEYS} == m.as_params(), env
         assert m.sigma_yaw == pytest.approx(np.radians(float(c["drift_yaw_deg"])))
         assert m.sigma_roll_pitch == drift_model.ROLL_PITCH[env], "roll/pitch: the documented constant"
 
 
 def test_a_changed_yaml_changes_the_drift_model(tmp_path):
-    text = open(drift_model.config_path("indoor")).read()
+    from roverlib import config
+    text = open(config.TEMPLATE).read()
     assert "\ndrift_xy: 0.05" in text
     (tmp_path / "a.yaml").write_text(text.replace("\ndrift_xy: 0.05", "\ndrift_xy: 0.3"))
     assert drift_model.from_yaml("indoor", str(tmp_path / "a.yaml")).sigma_xy == 0.3

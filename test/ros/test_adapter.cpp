@@ -1,7 +1,7 @@
 // The loop_fusion adapter, driven the way the patched VINS-Fusion loop_fusion drives it
 // (patches/vins_fusion_loop_fusion.patch), without VINS-Fusion. Runs under rostest
 // (test/ros/adapter.test) as the node `loop_fusion`, so ~ is /loop_fusion as in
-// launch/vins_rover.launch, which adapter.test mirrors by loading config/rover_indoor.yaml
+// launch/vins_rover.launch, which adapter.test mirrors by loading config/rover_template.yaml, then rover_indoor.yaml
 // into /loop_fusion/rover.
 //
 // FakePoseGraph below is PoseGraph::addKeyFrame / loadKeyFrame / setIMUFlag / savePoseGraph /

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Regression on a shipped scenario bag (data/<scenario>/scenario.bag), replayed into
-rover_verifier_node at the default parameters (config/rover_indoor.yaml, loaded unmodified by
+rover_verifier_node at the default parameters (config/rover_template.yaml then config/rover_indoor.yaml, loaded unmodified by
 bag_regression.test through launch/verifier.launch).
 
 Required: every false candidate rejected; at least MIN_RECALL of the true ones accepted; one
@@ -54,8 +54,10 @@ class BagRegression(unittest.TestCase):
         cls.score = bag_replay.score(cls.client, cls.labels, cls.truth)
         cls.current = cls.client.current()  # the final verdict of each candidate, or its deferred one while held
         cls.by_key = {bag_replay.verdict_key(v): v for v in cls.current}
-        with open(os.path.join(ROOT, "config", "rover_indoor.yaml")) as f:
-            cls.defaults = yaml.safe_load(f)
+        cls.defaults = {}
+        for name in ("rover_template.yaml", "rover_indoor.yaml"):  # the template, then the override
+            with open(os.path.join(ROOT, "config", name)) as f:
+                cls.defaults.update(yaml.safe_load(f) or {})
         cls.defaults["time_budget_ms"] = 0  # bag_regression.test turns the wall-clock budget off
 
     def test_default_parameters(self):

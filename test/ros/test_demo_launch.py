@@ -30,8 +30,10 @@ class DemoLaunch(unittest.TestCase):
             self.assertTrue(nodes[name].required)
         self.assertEqual(params["/rover_verifier/verifier_type"], "rover")
         self.assertEqual(params["/accept_all_verifier/verifier_type"], "accept_all")
-        with open(os.path.join(ROOT, "config", "rover_indoor.yaml")) as f:
-            indoor = yaml.safe_load(f)
+        indoor = {}
+        for name in ("rover_template.yaml", "rover_indoor.yaml"):  # the template, then the override
+            with open(os.path.join(ROOT, "config", name)) as f:
+                indoor.update(yaml.safe_load(f) or {})
         for key, value in indoor.items():
             self.assertEqual(params["/rover_verifier/rover/" + key], value, key)
         demo = nodes["rover_demo"]
@@ -87,12 +89,12 @@ class DemoLaunch(unittest.TestCase):
                          "verifier_config:=" + os.path.join(ROOT, "config", "rover_outdoor.yaml"))
         self.assertEqual(params["/b/verifier_type"], "accept_all")
         self.assertEqual(params["/b/rover/threshold"], 1.0)
-        # The global pass: the YAML's (off) unless the arg overrides it.
-        self.assertIs(params["/b/rover/global_check"], False)
+        # The global pass: not set (the core's default, off) unless the arg sets it.
+        self.assertNotIn("/b/rover/global_check", params)
         params, _ = load("verifier.launch", "global_check:=true")
         self.assertIs(params["/rover_verifier/rover/global_check"], True)
-        # ...and its budget per pass: the YAML's 200 ms unless the arg overrides it.
-        self.assertEqual(params["/rover_verifier/rover/global_budget_ms"], 200.0)
+        # ...and its budget per pass: not set (the core's 200 ms) unless the arg sets it.
+        self.assertNotIn("/rover_verifier/rover/global_budget_ms", params)
         params, _ = load("verifier.launch", "global_budget_ms:=50")
         self.assertEqual(params["/rover_verifier/rover/global_budget_ms"], 50.0)
 

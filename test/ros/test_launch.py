@@ -16,16 +16,16 @@ PKG = "rover_loop_fusion"
 ROOT = rospkg.RosPack().get_path(PKG)
 LAUNCH = os.path.join(ROOT, "launch", "vins_rover.launch")
 VINS_CONFIG = "/path/to/VINS-Fusion/config/euroc/euroc_stereo_imu_config.yaml"
-PARAM_NAMES = [  # verifierParameterNames() but the host-derived ones; test_config.cpp checks the YAMLs
-    "mode", "alignment", "threshold", "threshold_per_metre", "max_threshold", "max_innovation",
+PARAM_NAMES = [  # keys config/rover_template.yaml sets; test_config.cpp checks the YAMLs
+    "mode", "alignment", "threshold", "threshold_per_metre", "max_innovation",
     "max_innovation_per_metre", "max_iterations", "time_budget_ms",
     "function_tolerance", "odometry_neighbours", "loop_huber", "robust_candidate", "window_margin",
     "max_relative_translation", "max_relative_yaw_deg", "quaternion_tolerance"]
 
 
-def load(*args):
+def load(*args, launch=LAUNCH):
     config = roslaunch.config.ROSLaunchConfig()
-    roslaunch.xmlloader.XmlLoader().load(LAUNCH, config, argv=["config_file:=" + VINS_CONFIG] + list(args),
+    roslaunch.xmlloader.XmlLoader().load(launch, config, argv=["config_file:=" + VINS_CONFIG] + list(args),
                                          verbose=False)
     params = {name: p.value for name, p in config.params.items()}
     nodes = {n.name: n for n in config.nodes}
@@ -46,7 +46,7 @@ class VinsRoverLaunch(unittest.TestCase):
         self.assertIs(params["/loop_fusion/publish_markers"], True)
         self.assertEqual(params["/loop_fusion/marker_frame"], "world")
         self.assertEqual(params["/loop_fusion/relocalisation"], "confirm")  # held until confirmed
-        self.assertEqual(params["/loop_fusion/rover/threshold"], 0.2)  # config/rover_indoor.yaml
+        self.assertEqual(params["/loop_fusion/rover/threshold"], 0.2)  # config/rover_template.yaml
         for name in PARAM_NAMES:
             self.assertIn("/loop_fusion/rover/" + name, params)
 
@@ -69,6 +69,22 @@ class VinsRoverLaunch(unittest.TestCase):
         self.assertIs(params["/loop_fusion/fallback_to_accept_all"], True)
         self.assertEqual(params["/loop_fusion/relocalisation"], "accept_unverified")
         self.assertEqual(sorted(nodes), ["loop_fusion"])
+
+    def test_template_then_override_in_one_namespace(self):
+        # Every launch file loads config/rover_template.yaml, then verifier_config, into the
+        # verifier's namespace: the override's keys win, the template's others stay.
+        def read(name):
+            with open(os.path.join(ROOT, "config", name)) as f:
+                return yaml.safe_load(f) or {}
+        for env in ("indoor", "outdoor", "paper"):
+            want = dict(read("rover_template.yaml"), **read("rover_%s.yaml" % env))
+            override = "verifier_config:=" + os.path.join(ROOT, "config", "rover_%s.yaml" % env)
+            for launch, ns in ((LAUNCH, "/loop_fusion/rover/"),
+                               (os.path.join(ROOT, "launch", "verifier.launch"), "/rover_verifier/rover/"),
+                               (os.path.join(ROOT, "launch", "demo.launch"), "/rover_verifier/rover/")):
+                params, _ = load(override, launch=launch)
+                got = {k[len(ns):]: v for k, v in params.items() if k.startswith(ns)}
+                self.assertEqual(got, want, (env, launch))
 
     def test_rviz_config_shows_paths_and_verdict_markers(self):
         _, nodes = load()
