@@ -23,7 +23,6 @@ set(ROVER_CORE_SOURCES
   parameter_table.cpp
   verifier.cpp
   revocation.cpp
-  held_release.cpp
   global_release.cpp
   verdict_csv.cpp
 )
