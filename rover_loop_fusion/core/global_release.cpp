@@ -36,7 +36,7 @@ bool Verifier::holdForGlobal(const LoopCandidate& c, size_t qpos, size_t mpos, R
   h.match_pos = mpos;
   h.kind = HoldKind::kGlobal;
   if (!addToGlobalPool(h)) return false;
-  held_pairs_.emplace(PairKey(c.query_index, c.match_index), HeldPair());
+  emit_.held(c);
   *detail += "; held for the global pass (global_check)";
   return true;
 }
@@ -51,10 +51,8 @@ bool Verifier::addToGlobalPool(const HeldCandidate& held) {
   if (global_pool_.size() >= static_cast<size_t>(config_.global.global_max_held)) {
     const HeldCandidate oldest = global_pool_.front();
     global_pool_.erase(global_pool_.begin());
-    decide(LoopDecision::Kind::kDrop, oldest.candidate,
-           Verdict::Reject(Reason::kUnconfirmed, oldest.candidate,
-                           "dropped from the global pass's pool: global_max_held=" +
-                               std::to_string(config_.global.global_max_held) + " newer candidates wait"));
+    emit_.drop(oldest.candidate, "dropped from the global pass's pool: global_max_held=" +
+                                     std::to_string(config_.global.global_max_held) + " newer candidates wait");
   }
   global_pool_.push_back(h);
   ++global_pool_revision_;
@@ -173,7 +171,7 @@ Status Verifier::globalPass() {
         s << "an inlier; without it the others predict it at d2 " << r.d2 << " (gate " << c2 << "), std " << r.sigma
           << " m (global_max_sigma " << config_.global.global_max_sigma << " m)";
       s << ")";
-      decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, s.str()));
+      emit_.drop(h.candidate, s.str());
     } else {
       waiting.push_back(h);
     }

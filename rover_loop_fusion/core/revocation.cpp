@@ -119,7 +119,7 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
   pending_.valid = false;  // the graph changes below
   auto dropAll = [&](const std::vector<const HeldCandidate*>& hs, const std::string& why) {
     for (const HeldCandidate* h : hs)
-      decide(LoopDecision::Kind::kDrop, h->candidate, Verdict::Reject(Reason::kUnconfirmed, h->candidate, why));
+      emit_.drop(h->candidate, why);
   };
   std::vector<const HeldCandidate*> all;
   for (const HeldCandidate& h : group) all.push_back(&h);
@@ -200,15 +200,12 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
     std::ostringstream revoked;
     revoked << what.str() << ", contradict it and pass against the graph without it (" << passed.size() << " of "
             << group.size() << "; revoke_group=" << config_.hold.revoke_group << ")";
-    for (const LoopCandidate& l : loops) {
-      revoked_.insert({l.query_index, l.match_index});
-      decide(LoopDecision::Kind::kRevoke, l, Verdict::Reject(Reason::kRevoked, l, revoked.str()));
-    }
+    for (const LoopCandidate& l : loops) emit_.revoke(l, revoked.str());
     std::ostringstream released;
     released << what.str() << ": " << loops.size() << " accepted loop(s) they contradicted revoked ("
              << loops.front().query_index << "->" << loops.front().match_index << (loops.size() > 1 ? ", ..." : "")
              << ")";
-    for (const HeldCandidate* h : passed) decide(LoopDecision::Kind::kRelease, h->candidate, Verdict::Accept(h->candidate, released.str()));
+    for (const HeldCandidate* h : passed) emit_.release(h->candidate, released.str());
     dropAll(failed, what.str() + " and revoked the loops they contradict, but this one does not pass against the graph without them");
     return;
   }

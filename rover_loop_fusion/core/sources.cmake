@@ -20,6 +20,7 @@ set(ROVER_CORE_SOURCES
   held_candidates.cpp
   cycle_test.cpp
   parameters.cpp
+  verdict_emitter.cpp
   verifier.cpp
   revocation.cpp
   global_release.cpp

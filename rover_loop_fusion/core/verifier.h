@@ -52,6 +52,7 @@
 #include "rover_loop_fusion/core/held_candidates.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/types.h"
+#include "rover_loop_fusion/core/verdict_emitter.h"
 
 #include <Eigen/Geometry>
 
@@ -133,9 +134,6 @@ class Verifier {
 
  private:
   Verdict verifyLocked(const LoopCandidate& c, std::chrono::steady_clock::time_point t0);
-  /// A copy of a held, rejected or committed candidate (see the protocol above): its verdict in
-  /// *copy, true; false if `c` is not a copy.
-  bool verifyCopy(const LoopCandidate& c, std::chrono::steady_clock::time_point t0, Verdict* copy);
   /// Holds a candidate (a deferred verdict) and settles what is due.
   void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind, double d2 = 0.0);
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
@@ -202,7 +200,6 @@ class Verifier {
   double arrivalBudgetMs(double ms) const { return config_.trial.time_budget_ms > 0 ? ms : 0.0; }
   /// The cycle test of two held candidates (core/cycle_test.h) passes.
   bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
-  void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
   /// What the last verify() that accepted worked out, for commit() to keep.
   struct Pending {
     bool valid = false;
@@ -240,17 +237,8 @@ class Verifier {
     }
   };
   GlobalInputs last_global_inputs_;
-  std::vector<LoopDecision> decisions_;    ///< not yet taken
-  std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
-  using PairKey = std::pair<int64_t, int64_t>;  ///< (query, match)
-  /// A held candidate's verdict at verify and its copies, which get its decision.
-  struct HeldPair {
-    Verdict at_verify;
-    std::vector<LoopCandidate> copies;
-  };
-  std::map<PairKey, HeldPair> held_pairs_;
-  std::map<PairKey, std::vector<LoopCandidate>> released_copies_;  ///< revoked with their loop
-  std::map<PairKey, Verdict> rejected_;  ///< rejected or dropped: what a copy gets
+  /// Every verdict and decision leaves through it; it keeps the queue and the copies' bookkeeping.
+  VerdictEmitter emit_;
 };
 
 }  // namespace core
