@@ -18,6 +18,7 @@ set(ROVER_CORE_SOURCES
   decision.cpp
   decision_rule.cpp
   held_candidates.cpp
+  accepted_loops.cpp
   cycle_test.cpp
   parameters.cpp
   verdict_emitter.cpp

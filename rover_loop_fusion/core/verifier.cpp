@@ -1,6 +1,5 @@
 #include "rover_loop_fusion/core/verifier.h"
 
-#include "rover_loop_fusion/core/cycle_test.h"
 #include "rover_loop_fusion/core/decision.h"
 
 #include <algorithm>
@@ -28,6 +27,7 @@ Verifier::Verifier(const VerifierConfig& config)
       config_(config_error_.empty() ? config : VerifierConfig()),
       graph_(config_),
       rule_(makeDecisionRule(config_, graph_)),
+      loops_(config_, graph_, *rule_),
       held_(config_) {
   // What this configuration's decisions will need, kept up to date keyframe by keyframe and
   // loop by loop (a first use after 100k keyframes would otherwise build it all at once:
@@ -45,14 +45,17 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
   // The revisit hypotheses are judged, and dropped members re-tested, here only: on keyframe
   // arrival, the re-tests within revisit_retest_budget_ms counted from it (retestNow()).
-  if (!held_.empty()) {
+  if (!held_.settled()) {
     retest_.started = Clock::now();
     retest_.count = 0;
     settle(true);
-    held_.settleWaiting(graph_.keyframeCount(), [this] { return graph_.revision(); },
-                        [this](const HeldCandidate& h, const std::string& why) { dropMember(h, why, false); });
+    // Members waiting to be tested alone: those a commit or the end of revisit_window made due.
+    held_.beginWaiting();
+    HeldCandidate h;
+    std::string why;
+    while (held_.nextWaiting(graph_.keyframeCount(), graph_.revision(), &h, &why)) dropMember(h, why, false);
   }
-  if (!global_pool_.empty() &&
+  if (!held_.pool().empty() &&
       graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period)) {
     const Status pass = globalPass();
     if (s.ok && pass.warning()) return Status::Warning(s.warning() ? s.message + "; " + pass.message : pass.message);
@@ -204,21 +207,17 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return held_.size() + global_pool_.size() + emit_.heldCopies();
-}
-
-bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const {
-  return cycleTest(graph_, config_, rule_->driftScale(), a, b) == 1;
+  return held_.size() + emit_.heldCopies();
 }
 
 void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind, double d2) {
   emit_.held(c);
-  HeldCandidate h = heldFor(c);
+  HeldCandidate h = loops_.heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;
   h.kind = kind;
   h.d2 = d2;
-  held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
+  held_.add(h, loops_);
   // A revisit hypothesis is judged on keyframe arrival (addKeyframe), not here: its joint trial
   // (all its loops) would otherwise land on this verify()'s time (the cost of verify(), docs/results.md).
   if (kind != HoldKind::kRevisit) settle(false);
@@ -246,7 +245,7 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
   const bool retest = !contradicted && h.kind == HoldKind::kRevisit && h.revision != graph_.revision() &&
                       graph_.connected(h.query_pos, h.match_pos);
   if (retest && !retestNow()) {
-    held_.wait(h, why);  // tested alone on the next keyframe's arrival (settleWaiting())
+    held_.wait(h, why);  // tested alone on the next keyframe's arrival (nextWaiting())
     return;
   }
   if (retest) ++retest_.count;
@@ -263,7 +262,7 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
 }
 
 bool Verifier::retestNow() const {
-  // Called on keyframe arrival only (settle(true), settleWaiting()). While the keyframe's work is
+  // Called on keyframe arrival only (settle(true), nextWaiting()). While the keyframe's work is
   // within revisit_retest_budget_ms; the first re-test of a keyframe always runs (each is bounded
   // by time_budget_ms itself), so every waiting member is tested in turn however busy the
   // keyframes are.
@@ -272,53 +271,29 @@ bool Verifier::retestNow() const {
 }
 
 void Verifier::settle(bool revisit) {
-  HeldCandidates::Actions act;
-  act.rival_targets = [this](const HeldGroup& g) { return rivalTargets(g); };
-  act.settle_rivals = [this](const HeldGroup& g, const std::vector<LoopCandidate>& loops) { settleRivals(g, loops); };
-  act.release = [this](const HeldGroup& g) { release(g); };
-  act.drop = [this](const HeldGroup& g, const std::string& why, bool contradicted) { drop(g, why, contradicted); };
-  act.judge = [this](const HeldGroup& g, std::string* why) { return judgeRevisit(g, why); };
-  act.misfit = [this](const HeldGroup& g) { return rule_->misfit(g); };
-  held_.settle(graph_.keyframeCount(), act, revisit);
-}
-
-bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
-  // A hypothesis that contradicts accepted loops of its stretch is not released: the accepted
-  // loops passed alone or with their own revisit, and a look-alike row contradicts them. Only
-  // loops whose matches lie within the stretch too: where a revisit's matches jump across the
-  // start of a loop run (lap 3's first loops match lap 1's start, lap 2's last its end), the
-  // VIO odometry between the matches is a whole lap, whose drift the model underrates; found
-  // inside loop_fusion, where it kept a third lap from closing (docs/vins-fusion.md).
-  size_t contradicting = 0;
-  LoopCandidate example;
-  for (const HeldCandidate& h : group) {
-    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit.revisit_stretch), true);
-    if (!against.empty()) {
-      ++contradicting;
-      example = against.front();
+  // The store says what is due, one group at a time; each is acted on before the next is asked
+  // for (a release or a revocation changes the graph the store's tests read).
+  held_.beginSettle(graph_.keyframeCount(), revisit);
+  HeldCandidates::Due due;
+  while (held_.nextDue(loops_, &due)) {
+    switch (due.action) {
+      case HeldCandidates::Due::Action::kRelease: {
+        // The judge's text opens with the hypothesis' size and loops, which the release names itself.
+        const size_t body = due.why.find("): ");
+        release(due.group, body != std::string::npos ? due.why.substr(body + 3) : std::string());
+        for (const HeldGroup& g : due.dropped) drop(g, due.dropped_why, true);
+        break;
+      }
+      case HeldCandidates::Due::Action::kSettleRivals: settleRivals(due.group, due.targets); break;
+      case HeldCandidates::Due::Action::kDrop: drop(due.group, due.why, false); break;
     }
   }
-  if (2 * contradicting > group.size()) {
-    std::ostringstream s;
-    s << "revisit hypothesis of " << group.size() << ": " << contradicting
-      << " of its members contradict accepted loops of their stretch (e.g. " << example.query_index << "->"
-      << example.match_index << ")";
-    *why = s.str();
-    return false;
-  }
-  const bool passed = rule_->judge(group, why);
-  // The rule's text opens with the hypothesis' size and loops, which the release names itself.
-  const size_t body = why->find("): ");
-  judged_ = passed && body != std::string::npos ? why->substr(body + 3) : std::string();
-  return passed;
 }
 
-void Verifier::release(const HeldGroup& group) {
+void Verifier::release(const HeldGroup& group, const std::string& judged) {
   std::ostringstream why;
   const bool revisit = group.front().kind == HoldKind::kRevisit;
   const bool global = group.front().kind == HoldKind::kGlobal;
-  const std::string judged = revisit ? judged_ : std::string();
-  judged_.clear();
   if (revisit)
     why << "released with its revisit hypothesis: " << group.size() << " mutually consistent candidates (loops ";
   else if (global)
