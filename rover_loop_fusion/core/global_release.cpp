@@ -26,17 +26,112 @@ bool contradictsTheGraph(Reason reason) {
          reason == Reason::kInconsistentWithDrift;
 }
 
+/// What one global pass worked out over the pool, candidate by candidate (in pool order).
+struct Pass {
+  double c2 = 0.0, tear = 0.0, prior_gate = 0.0;  ///< the chi-square bounds of its tests
+  std::vector<LoopCandidate> candidates;
+  std::vector<double> prior_d2;  ///< against the prior of the accepted loops alone
+  std::vector<bool> eligible;    ///< passed that test: tested further alone
+  std::vector<GlobalLoop> found;
+  std::vector<bool> releasable;
+  std::vector<long> rival;  ///< global_compete: the rival that passes instead, or -1
+  bool stopped = false;     ///< global_budget_ms ran out: nothing is decided
+  bool passes(const GlobalConfig& g, const GlobalLoop& r, size_t i) const {
+    return eligible[i] && r.inlier && !r.torn && r.pinned && r.d2 <= c2 && (g.global_max_sigma <= 0 || r.sigma <= g.global_max_sigma);
+  }
+};
+
+/// Each candidate against the prior alone (the accepted loops, not the pool): a world of
+/// look-alikes that agree with each other (floors of a deck, a shifted stretch) passes every
+/// test among themselves, but not this one. Only those that pass it are tested further alone.
+void testPrior(const KeyframeGraph& graph, double drift_scale, const std::vector<HeldCandidate>& pool, Pass* p) {
+  p->prior_d2.assign(pool.size(), std::numeric_limits<double>::infinity());
+  p->eligible.assign(pool.size(), false);
+  for (size_t i = 0; i < pool.size(); ++i) {
+    const HeldCandidate& h = pool[i];
+    p->candidates.push_back(h.candidate);
+    Eigen::Matrix4d C;
+    if (graph.connected(h.query_pos, h.match_pos) && graph.relativeCovariance(h.match_pos, h.query_pos, drift_scale, &C)) {
+      const Eigen::Vector4d nu = graph.innovationVector(h.candidate, h.query_pos, h.match_pos);
+      p->prior_d2[i] = mahalanobis(nu, C + graph.loopCovariance());
+    }
+    p->eligible[i] = p->prior_d2[i] <= p->prior_gate;
+  }
+}
+
+/// Competition: solved again without the releasable ones, a rival of one of them is a pooled
+/// candidate of the same revisit (queries within revisit_stretch) that the first solve
+/// rejected and that now passes every test. A revisit that two incompatible sets of
+/// candidates explain equally well is ambiguous: neither is released.
+void compete(const KeyframeGraph& graph, const VerifierConfig& config, double drift_scale,
+             const std::vector<HeldCandidate>& pool, std::chrono::steady_clock::time_point deadline, Pass* p) {
+  std::vector<LoopCandidate> rest;
+  std::vector<bool> rest_eligible;
+  std::vector<size_t> rest_index;
+  for (size_t i = 0; i < pool.size(); ++i) {
+    if (p->releasable[i]) continue;
+    rest.push_back(p->candidates[i]);
+    rest_eligible.push_back(p->eligible[i]);
+    rest_index.push_back(i);
+  }
+  std::vector<GlobalLoop> alt;
+  graph.globalConsistency(rest, p->c2, p->tear, drift_scale, rest_eligible, &alt, deadline, &p->stopped);
+  if (p->stopped) std::fill(p->releasable.begin(), p->releasable.end(), false);
+  const size_t stretch = static_cast<size_t>(std::max(0, config.revisit.revisit_stretch));
+  for (size_t k = 0; k < rest.size(); ++k) {
+    const size_t j = rest_index[k];
+    if (p->found[j].inlier || !p->passes(config.global, alt[k], j)) continue;
+    for (size_t i = 0; i < pool.size(); ++i) {
+      if (!p->releasable[i]) continue;
+      const size_t qi = pool[i].query_pos, qj = pool[j].query_pos;
+      if ((qi > qj ? qi - qj : qj - qi) <= stretch) p->rival[i] = static_cast<long>(j);
+    }
+  }
+  for (size_t i = 0; i < pool.size(); ++i) p->releasable[i] = p->releasable[i] && p->rival[i] < 0;
+}
+
+/// Why the pooled candidate `i`, not released when its window ended, is dropped.
+std::string notReleased(const GlobalConfig& g, const std::vector<HeldCandidate>& pool, const Pass& p, size_t i) {
+  const GlobalLoop& r = p.found[i];
+  std::ostringstream s;
+  s.precision(3);
+  s << std::fixed << "not released by the global pass within global_window=" << g.global_window
+    << " keyframes (last pass: ";
+  if (p.stopped)
+    s << "stopped after global_budget_ms=" << std::defaultfloat << g.global_budget_ms << std::fixed
+      << " ms, nothing released";
+  else if (p.rival[i] >= 0)
+    s << "ambiguous: without it and the others that pass, the rival loop "
+      << pool[p.rival[i]].candidate.query_index << "->" << pool[p.rival[i]].candidate.match_index
+      << " of the same revisit passes every test instead (global_compete)";
+  else if (!p.eligible[i])
+    s << "ruled out by the prior of the accepted loops alone: d2 " << p.prior_d2[i] << " > " << p.prior_gate;
+  else if (!std::isfinite(r.chi2))
+    s << "not solved";
+  else if (!r.inlier)
+    s << "an outlier of the robust solve, residual chi2 " << r.chi2 << " (inliers <= " << p.c2 << ")";
+  else if (r.torn)
+    s << "an inlier of a solution that bends the odometry between its ends beyond chi2 " << p.tear;
+  else if (!r.pinned)
+    s << "an inlier, but the graph without it could not be solved";
+  else
+    s << "an inlier; without it the others predict it at d2 " << r.d2 << " (gate " << p.c2 << "), std " << r.sigma
+      << " m (global_max_sigma " << g.global_max_sigma << " m)";
+  s << ")";
+  return s.str();
+}
+
 }  // namespace
 
 bool Verifier::holdForGlobal(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
   if (!config_.global.global_check || config_.decision != Decision::kRevisit || !contradictsTheGraph(reason))
     return false;
-  HeldCandidate h = heldFor(c);
+  HeldCandidate h = loops_.heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;
   h.kind = HoldKind::kGlobal;
   if (!addToGlobalPool(h)) return false;
-  held_pairs_.emplace(PairKey(c.query_index, c.match_index), HeldPair());
+  emit_.held(c);
   *detail += "; held for the global pass (global_check)";
   return true;
 }
@@ -48,30 +143,24 @@ bool Verifier::addToGlobalPool(const HeldCandidate& held) {
   HeldCandidate h = held;
   h.kind = HoldKind::kGlobal;
   h.arrived = graph_.keyframeCount();
-  if (global_pool_.size() >= static_cast<size_t>(config_.global.global_max_held)) {
-    const HeldCandidate oldest = global_pool_.front();
-    global_pool_.erase(global_pool_.begin());
-    decide(LoopDecision::Kind::kDrop, oldest.candidate,
-           Verdict::Reject(Reason::kUnconfirmed, oldest.candidate,
-                           "dropped from the global pass's pool: global_max_held=" +
-                               std::to_string(config_.global.global_max_held) + " newer candidates wait"));
-  }
-  global_pool_.push_back(h);
-  ++global_pool_revision_;
+  HeldCandidate oldest;
+  if (held_.addToPool(h, static_cast<size_t>(config_.global.global_max_held), &oldest))
+    emit_.drop(oldest.candidate, "dropped from the global pass's pool: global_max_held=" +
+                                     std::to_string(config_.global.global_max_held) + " newer candidates wait");
   return true;
 }
 
 Status Verifier::globalPass() {
   const size_t now = graph_.keyframeCount();
   last_global_pass_ = now;
+  const std::vector<HeldCandidate>& pool = held_.pool();
   // Nothing it depends on changed since the last pass (keyframes after the newest anchor do
   // not enter the condensed graph): that pass's outcome stands, unless a window ends.
   auto expired = [&](const HeldCandidate& h) {
     return now >= h.arrived + static_cast<size_t>(config_.global.global_window);
   };
-  const GlobalInputs inputs{graph_.revision(), global_pool_revision_, rule_->driftScale()};
-  if (inputs == last_global_inputs_ && std::none_of(global_pool_.begin(), global_pool_.end(), expired))
-    return Status::Ok();
+  const GlobalInputs inputs{graph_.revision(), held_.poolRevision(), rule_->driftScale()};
+  if (inputs == last_global_inputs_ && std::none_of(pool.begin(), pool.end(), expired)) return Status::Ok();
   last_global_inputs_ = inputs;
   // global_budget_ms, counted from here (the trials' time_budget_ms 0 lifts it: benchmarks).
   using Clock = std::chrono::steady_clock;
@@ -80,111 +169,35 @@ Status Verifier::globalPass() {
   const double budget = arrivalBudgetMs(config_.global.global_budget_ms);
   const auto deadline = budget > 0 ? started + std::chrono::duration_cast<Clock::duration>(Ms(budget))
                                    : Clock::time_point::max();
-  bool stopped = false;
-  const double c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
-  const double tear = chiSquareQuantile(config_.global.global_tear_probability, 4);
-  const double prior_gate = chiSquareQuantile(config_.global.global_prior_probability, 4);
-  // Each candidate against the prior alone (the accepted loops, not the pool): a world of
-  // look-alikes that agree with each other (floors of a deck, a shifted stretch) passes every
-  // test among themselves, but not this one. Only those that pass it are tested further alone.
-  std::vector<LoopCandidate> candidates;
-  std::vector<double> prior_d2(global_pool_.size(), std::numeric_limits<double>::infinity());
-  std::vector<bool> eligible(global_pool_.size(), false);
-  for (size_t i = 0; i < global_pool_.size(); ++i) {
-    const HeldCandidate& h = global_pool_[i];
-    candidates.push_back(h.candidate);
-    Eigen::Matrix4d C;
-    if (graph_.connected(h.query_pos, h.match_pos) &&
-        graph_.relativeCovariance(h.match_pos, h.query_pos, rule_->driftScale(), &C)) {
-      const Eigen::Vector4d nu = graph_.innovationVector(h.candidate, h.query_pos, h.match_pos);
-      prior_d2[i] = mahalanobis(nu, C + graph_.loopCovariance());
-    }
-    eligible[i] = prior_d2[i] <= prior_gate;
-  }
-  std::vector<GlobalLoop> found;
-  graph_.globalConsistency(candidates, c2, tear, rule_->driftScale(), eligible, &found, deadline, &stopped);
-  auto passes = [&](const GlobalLoop& r, size_t i) {
-    return eligible[i] && r.inlier && !r.torn && r.pinned && r.d2 <= c2 &&
-           (config_.global.global_max_sigma <= 0 || r.sigma <= config_.global.global_max_sigma);
-  };
-  std::vector<bool> releasable(global_pool_.size());
+  Pass p;
+  p.c2 = chiSquareQuantile(config_.global.global_inlier_probability, 4);
+  p.tear = chiSquareQuantile(config_.global.global_tear_probability, 4);
+  p.prior_gate = chiSquareQuantile(config_.global.global_prior_probability, 4);
+  testPrior(graph_, rule_->driftScale(), pool, &p);
+  graph_.globalConsistency(p.candidates, p.c2, p.tear, rule_->driftScale(), p.eligible, &p.found, deadline, &p.stopped);
+  p.releasable.assign(pool.size(), false);
+  p.rival.assign(pool.size(), -1);
   bool any = false;
-  for (size_t i = 0; !stopped && i < global_pool_.size(); ++i) any = (releasable[i] = passes(found[i], i)) || any;
-  // Competition: solved again without the releasable ones, a rival of one of them is a pooled
-  // candidate of the same revisit (queries within revisit_stretch) that the first solve
-  // rejected and that now passes every test. A revisit that two incompatible sets of
-  // candidates explain equally well is ambiguous: neither is released.
-  std::vector<long> rival(global_pool_.size(), -1);
-  if (any && config_.global.global_compete) {
-    std::vector<LoopCandidate> rest;
-    std::vector<bool> rest_eligible;
-    std::vector<size_t> rest_index;
-    for (size_t i = 0; i < global_pool_.size(); ++i) {
-      if (releasable[i]) continue;
-      rest.push_back(candidates[i]);
-      rest_eligible.push_back(eligible[i]);
-      rest_index.push_back(i);
-    }
-    std::vector<GlobalLoop> alt;
-    graph_.globalConsistency(rest, c2, tear, rule_->driftScale(), rest_eligible, &alt, deadline, &stopped);
-    if (stopped) std::fill(releasable.begin(), releasable.end(), false);
-    const size_t stretch = static_cast<size_t>(std::max(0, config_.revisit.revisit_stretch));
-    for (size_t k = 0; k < rest.size(); ++k) {
-      const size_t j = rest_index[k];
-      if (found[j].inlier || !passes(alt[k], j)) continue;
-      for (size_t i = 0; i < global_pool_.size(); ++i) {
-        if (!releasable[i]) continue;
-        const size_t qi = global_pool_[i].query_pos, qj = global_pool_[j].query_pos;
-        if ((qi > qj ? qi - qj : qj - qi) <= stretch) rival[i] = static_cast<long>(j);
-      }
-    }
-    for (size_t i = 0; i < global_pool_.size(); ++i) releasable[i] = releasable[i] && rival[i] < 0;
-  }
+  for (size_t i = 0; !p.stopped && i < pool.size(); ++i)
+    any = (p.releasable[i] = p.passes(config_.global, p.found[i], i)) || any;
+  if (any && config_.global.global_compete) compete(graph_, config_, rule_->driftScale(), pool, deadline, &p);
   HeldGroup released;
   std::vector<HeldCandidate> waiting;
-  for (size_t i = 0; i < global_pool_.size(); ++i) {
-    const HeldCandidate& h = global_pool_[i];
-    const GlobalLoop& r = found[i];
-    if (releasable[i]) {
+  for (size_t i = 0; i < pool.size(); ++i) {
+    const HeldCandidate& h = pool[i];
+    if (p.releasable[i])
       released.push_back(h);
-    } else if (expired(h) || !graph_.connected(h.query_pos, h.match_pos)) {
-      std::ostringstream s;
-      s.precision(3);
-      s << std::fixed << "not released by the global pass within global_window=" << config_.global.global_window
-        << " keyframes (last pass: ";
-      if (stopped)
-        s << "stopped after global_budget_ms=" << std::defaultfloat << config_.global.global_budget_ms << std::fixed
-          << " ms, nothing released";
-      else if (rival[i] >= 0)
-        s << "ambiguous: without it and the others that pass, the rival loop "
-          << global_pool_[rival[i]].candidate.query_index << "->" << global_pool_[rival[i]].candidate.match_index
-          << " of the same revisit passes every test instead (global_compete)";
-      else if (!eligible[i])
-        s << "ruled out by the prior of the accepted loops alone: d2 " << prior_d2[i] << " > " << prior_gate;
-      else if (!std::isfinite(r.chi2))
-        s << "not solved";
-      else if (!r.inlier)
-        s << "an outlier of the robust solve, residual chi2 " << r.chi2 << " (inliers <= " << c2 << ")";
-      else if (r.torn)
-        s << "an inlier of a solution that bends the odometry between its ends beyond chi2 " << tear;
-      else if (!r.pinned)
-        s << "an inlier, but the graph without it could not be solved";
-      else
-        s << "an inlier; without it the others predict it at d2 " << r.d2 << " (gate " << c2 << "), std " << r.sigma
-          << " m (global_max_sigma " << config_.global.global_max_sigma << " m)";
-      s << ")";
-      decide(LoopDecision::Kind::kDrop, h.candidate, Verdict::Reject(Reason::kUnconfirmed, h.candidate, s.str()));
-    } else {
+    else if (expired(h) || !graph_.connected(h.query_pos, h.match_pos))
+      emit_.drop(h.candidate, notReleased(config_.global, pool, p, i));
+    else
       waiting.push_back(h);
-    }
   }
-  if (waiting.size() != global_pool_.size()) ++global_pool_revision_;
-  global_pool_.swap(waiting);
-  if (stopped) {
+  held_.keepInPool(std::move(waiting));
+  if (p.stopped) {
     last_global_inputs_ = GlobalInputs();  // nothing was decided: the next pass runs again
     std::ostringstream s;
     s.precision(1);
-    s << std::fixed << "the global pass over " << candidates.size() << " pooled candidates stopped after "
+    s << std::fixed << "the global pass over " << p.candidates.size() << " pooled candidates stopped after "
       << Ms(Clock::now() - started).count() << " ms (global_budget_ms=" << std::defaultfloat
       << config_.global.global_budget_ms << "): nothing released; the pool waits for the next pass";
     return Status::Warning(s.str());

@@ -1,57 +1,62 @@
 // Revocation (revoke_group, core/verifier.h): a candidate rejected for contradicting the graph
 // that is inconsistent with an accepted loop of its stretch is held as a rival; a confirmed group
-// of rivals is decided against the graph without the loops it contradicts. Also what decision
-// revisit asks of the accepted loops (contradicted(), extendsRevisit()).
+// of rivals is decided against the graph without the loops it contradicts. Also decision
+// revisit's extension of a revisit by its accepted loops (extendsRevisit()); both ask the
+// accepted loops (core/accepted_loops.h).
 #include "rover_loop_fusion/core/verifier.h"
 
-#include "rover_loop_fusion/core/cycle_test.h"
 #include "rover_loop_fusion/core/decision.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <map>
 #include <sstream>
 
 namespace rover_loop_fusion {
 namespace core {
 
-HeldCandidate Verifier::heldFor(const LoopCandidate& c) const {
-  HeldCandidate h;
-  h.candidate = c;
-  graph_.find(c.query_index, &h.query_pos);
-  graph_.find(c.match_index, &h.match_pos);
-  h.query_segment = graph_.segmentAt(h.query_pos);
-  h.match_segment = graph_.segmentAt(h.match_pos);
-  h.arrived = graph_.keyframeCount();
-  h.revision = graph_.revision();
-  return h;
+namespace {
+
+/// Which of the two fits the graph without the `loops` better, decisively: empty if the rivals
+/// of `group` do, else why not (`what`: the group, as its verdicts name it). The larger group
+/// alone is no reason: a row of look-alikes can outnumber a true revisit, and after long drift the
+/// prior cannot tell them apart. The misfit of a loop: its innovation's squared Mahalanobis
+/// distance under the drift model (both decisions, 4-DoF and 6-DoF); the rivals' median must
+/// be within the chi-square gate (gate_probability: they fit at all) and lower than the loops'
+/// by revoke_margin (2 ln of the likelihood ratio, as the look-alike test's lookalike_margin). Without a
+/// covariance nothing is revoked.
+std::string fitsWorse(const KeyframeGraph& graph, const VerifierConfig& config, double drift_scale,
+                      const HeldGroup& group, const std::vector<LoopCandidate>& loops, const std::string& what) {
+  auto misfit = [&](const LoopCandidate& c) {
+    size_t q = 0, m = 0;
+    Eigen::Matrix4d C;
+    if (!graph.find(c.query_index, &q) || !graph.find(c.match_index, &m) ||
+        !graph.relativeCovariance(m, q, drift_scale, &C))
+      return std::numeric_limits<double>::infinity();
+    return mahalanobis(graph.innovationVector(c, q, m), C + graph.loopCovariance());
+  };
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  std::vector<double> fit_loops, fit_rivals;
+  for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
+  for (const HeldCandidate& h : group) fit_rivals.push_back(misfit(h.candidate));
+  const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
+  const double gate = chiSquareQuantile(config.chi2.gate_probability, 4);
+  if (std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config.hold.revoke_margin < misfit_loops)
+    return std::string();
+  std::ostringstream s;
+  s.precision(3);
+  s << what << ", but they do not fit the graph without the " << loops.size()
+    << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
+    << "distance " << misfit_rivals << " vs " << misfit_loops << "; needed: within the gate " << gate
+    << " and lower by revoke_margin " << config.hold.revoke_margin << "): nothing revoked";
+  return s.str();
 }
 
-Verifier::StretchLoops Verifier::stretchLoops(const HeldCandidate& h, size_t window, bool near_matches,
-                                              double max_residual) const {
-  const size_t first = h.query_pos > window ? h.query_pos - window : 0;
-  StretchLoops out;
-  for (const LoopCandidate& l : graph_.loopsWithQueryIn(first, h.query_pos + window)) {
-    const HeldCandidate a = heldFor(l);
-    if ((near_matches && keyframeDistance(a.match_pos, h.match_pos) > window) ||
-        graph_.segmentAt(a.query_pos) != graph_.segmentAt(h.query_pos))
-      continue;
-    // Along the VIO odometry: the accepted loops (false ones among them) have bent X.
-    double residual = 0.0;
-    const int r = cycleTest(graph_, config_, rule_->driftScale(), a, h, true, &residual);
-    if (r == 0 || (r == 1 && !(residual <= max_residual)))
-      out.contradict.push_back(l);
-    else if (r == 1)
-      out.agree.push_back(l);
-  }
-  return out;
-}
-
-std::vector<LoopCandidate> Verifier::contradicted(const HeldCandidate& h, size_t window, bool near_matches) const {
-  return stretchLoops(h, window, near_matches).contradict;
-}
+}  // namespace
 
 bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, const Check& failed,
                               std::chrono::steady_clock::time_point t0, Verdict* measured, Decided* decided,
@@ -59,8 +64,8 @@ bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, 
   if (config_.decision != Decision::kRevisit || config_.revisit.revisit_extend <= 0) return false;
   if (failed.reason != Reason::kInnovationAboveBound && failed.reason != Reason::kScoreAboveThreshold) return false;
   // Both legs short (matches within the stretch too): what X made of the accepted loops plays no part.
-  const StretchLoops loops = stretchLoops(heldFor(c), static_cast<size_t>(config_.revisit.revisit_stretch), true,
-                                          config_.revisit.revisit_extend_residual);
+  const AcceptedLoops::StretchLoops loops = loops_.stretchLoops(
+      loops_.heldFor(c), static_cast<size_t>(config_.revisit.revisit_stretch), true, config_.revisit.revisit_extend_residual);
   if (!loops.contradict.empty() || loops.agree.size() < static_cast<size_t>(config_.revisit.revisit_extend))
     return false;
   const int agree = static_cast<int>(loops.agree.size());
@@ -88,7 +93,7 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   h.candidate = c;
   h.query_pos = qpos;
   h.match_pos = mpos;
-  const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.hold.confirm_stretch));
+  const std::vector<LoopCandidate> against = loops_.contradicted(h, static_cast<size_t>(config_.hold.confirm_stretch));
   if (against.empty()) return false;
   std::ostringstream s;
   s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
@@ -101,25 +106,11 @@ bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Rea
   return true;
 }
 
-std::vector<LoopCandidate> Verifier::rivalTargets(const HeldGroup& group) const {
-  std::map<std::pair<int64_t, int64_t>, std::pair<LoopCandidate, size_t>> votes;
-  for (const HeldCandidate& h : group)
-    for (const LoopCandidate& l : contradicted(h, static_cast<size_t>(config_.hold.confirm_stretch))) {
-      auto& v = votes[{l.query_index, l.match_index}];
-      v.first = l;
-      ++v.second;
-    }
-  std::vector<LoopCandidate> loops;
-  for (const auto& kv : votes)
-    if (2 * kv.second.second > group.size()) loops.push_back(kv.second.first);
-  return loops;
-}
-
 void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops) {
   pending_.valid = false;  // the graph changes below
   auto dropAll = [&](const std::vector<const HeldCandidate*>& hs, const std::string& why) {
     for (const HeldCandidate* h : hs)
-      decide(LoopDecision::Kind::kDrop, h->candidate, Verdict::Reject(Reason::kUnconfirmed, h->candidate, why));
+      emit_.drop(h->candidate, why);
   };
   std::vector<const HeldCandidate*> all;
   for (const HeldCandidate& h : group) all.push_back(&h);
@@ -154,38 +145,9 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
     dropAll(all, why);
   };
 
-  // Which of the two fits the graph without them better, decisively. The larger group alone is
-  // no reason: a row of look-alikes can outnumber a true revisit, and after long drift the
-  // prior cannot tell them apart. The misfit of a loop: its innovation's squared Mahalanobis
-  // distance under the drift model (both decisions, 4-DoF and 6-DoF); the rivals' median must
-  // be within the chi-square gate (gate_probability: they fit at all) and lower than the loops'
-  // by revoke_margin (2 ln of the likelihood ratio, as the look-alike test's lookalike_margin). Without a
-  // covariance nothing is revoked.
-  auto misfit = [&](const LoopCandidate& c) {
-    size_t q = 0, m = 0;
-    Eigen::Matrix4d C;
-    if (!graph_.find(c.query_index, &q) || !graph_.find(c.match_index, &m) ||
-        !graph_.relativeCovariance(m, q, rule_->driftScale(), &C))
-      return std::numeric_limits<double>::infinity();
-    return mahalanobis(graph_.innovationVector(c, q, m), C + graph_.loopCovariance());
-  };
-  auto median = [](std::vector<double> v) {
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    return v[v.size() / 2];
-  };
-  std::vector<double> fit_loops, fit_rivals;
-  for (const LoopCandidate& l : loops) fit_loops.push_back(misfit(l));
-  for (const HeldCandidate& h : group) fit_rivals.push_back(misfit(h.candidate));
-  const double misfit_loops = median(fit_loops), misfit_rivals = median(fit_rivals);
-  const double gate = chiSquareQuantile(config_.chi2.gate_probability, 4);
-  if (!(std::isfinite(misfit_loops) && misfit_rivals <= gate && misfit_rivals + config_.hold.revoke_margin < misfit_loops)) {
-    std::ostringstream s;
-    s.precision(3);
-    s << what.str() << ", but they do not fit the graph without the " << loops.size()
-      << " accepted loop(s) they contradict decisively better than those loops (median squared Mahalanobis "
-      << "distance " << misfit_rivals << " vs " << misfit_loops << "; needed: within the gate " << gate
-      << " and lower by revoke_margin " << config_.hold.revoke_margin << "): nothing revoked";
-    putBack(s.str());
+  const std::string worse = fitsWorse(graph_, config_, rule_->driftScale(), group, loops, what.str());
+  if (!worse.empty()) {
+    putBack(worse);
     return;
   }
 
@@ -200,15 +162,12 @@ void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandid
     std::ostringstream revoked;
     revoked << what.str() << ", contradict it and pass against the graph without it (" << passed.size() << " of "
             << group.size() << "; revoke_group=" << config_.hold.revoke_group << ")";
-    for (const LoopCandidate& l : loops) {
-      revoked_.insert({l.query_index, l.match_index});
-      decide(LoopDecision::Kind::kRevoke, l, Verdict::Reject(Reason::kRevoked, l, revoked.str()));
-    }
+    for (const LoopCandidate& l : loops) emit_.revoke(l, revoked.str());
     std::ostringstream released;
     released << what.str() << ": " << loops.size() << " accepted loop(s) they contradicted revoked ("
              << loops.front().query_index << "->" << loops.front().match_index << (loops.size() > 1 ? ", ..." : "")
              << ")";
-    for (const HeldCandidate* h : passed) decide(LoopDecision::Kind::kRelease, h->candidate, Verdict::Accept(h->candidate, released.str()));
+    for (const HeldCandidate* h : passed) emit_.release(h->candidate, released.str());
     dropAll(failed, what.str() + " and revoked the loops they contradict, but this one does not pass against the graph without them");
     return;
   }

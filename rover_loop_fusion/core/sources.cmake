@@ -18,9 +18,11 @@ set(ROVER_CORE_SOURCES
   decision.cpp
   decision_rule.cpp
   held_candidates.cpp
+  accepted_loops.cpp
   cycle_test.cpp
   parameters.cpp
   parameter_table.cpp
+  verdict_emitter.cpp
   verifier.cpp
   revocation.cpp
   global_release.cpp

@@ -1,6 +1,5 @@
 #include "rover_loop_fusion/core/verifier.h"
 
-#include "rover_loop_fusion/core/cycle_test.h"
 #include "rover_loop_fusion/core/decision.h"
 
 #include <algorithm>
@@ -21,22 +20,6 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-/// `decided` with the numbers measured on the way to it (`measured`) and the time taken.
-Verdict withNumbers(Verdict decided, const Verdict& measured, Clock::time_point t0) {
-  decided.score = measured.score;
-  decided.threshold = measured.threshold;
-  decided.d2 = measured.d2;
-  decided.gate = measured.gate;
-  decided.converged = measured.converged;
-  decided.iterations = measured.iterations;
-  decided.window_size = measured.window_size;
-  decided.innovation = measured.innovation;
-  decided.path_length = measured.path_length;
-  decided.solve_ms = measured.solve_ms;
-  decided.elapsed_ms = msSince(t0);
-  return decided;
-}
-
 }  // namespace
 
 Verifier::Verifier(const VerifierConfig& config)
@@ -44,6 +27,7 @@ Verifier::Verifier(const VerifierConfig& config)
       config_(config_error_.empty() ? config : VerifierConfig()),
       graph_(config_),
       rule_(makeDecisionRule(config_, graph_)),
+      loops_(config_, graph_, *rule_),
       held_(config_) {
   // What this configuration's decisions will need, kept up to date keyframe by keyframe and
   // loop by loop (a first use after 100k keyframes would otherwise build it all at once:
@@ -61,14 +45,17 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
   const Status s = graph_.addKeyframe(index, stamp, sequence, t, q, step_covariance);
   // The revisit hypotheses are judged, and dropped members re-tested, here only: on keyframe
   // arrival, the re-tests within revisit_retest_budget_ms counted from it (retestNow()).
-  if (!held_.empty()) {
+  if (!held_.settled()) {
     retest_.started = Clock::now();
     retest_.count = 0;
     settle(true);
-    held_.settleWaiting(graph_.keyframeCount(), [this] { return graph_.revision(); },
-                        [this](const HeldCandidate& h, const std::string& why) { dropMember(h, why, false); });
+    // Members waiting to be tested alone: those a commit or the end of revisit_window made due.
+    held_.beginWaiting();
+    HeldCandidate h;
+    std::string why;
+    while (held_.nextWaiting(graph_.keyframeCount(), graph_.revision(), &h, &why)) dropMember(h, why, false);
   }
-  if (!global_pool_.empty() &&
+  if (!held_.pool().empty() &&
       graph_.keyframeCount() >= last_global_pass_ + static_cast<size_t>(config_.global.global_period)) {
     const Status pass = globalPass();
     if (s.ok && pass.warning()) return Status::Warning(s.warning() ? s.message + "; " + pass.message : pass.message);
@@ -80,82 +67,31 @@ Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
   Verdict v;
-  if (verifyCopy(c, t0, &v)) return v;
-  v = verifyLocked(c, t0);
-  const PairKey key(c.query_index, c.match_index);
-  if (v.deferred) {
-    // Held (hold(), holdForGlobal()): its copies get its numbers. Decided already inside this
-    // verify() (a group it completed was settled at once): a drop's copies get its numbers too.
-    const auto held = held_pairs_.find(key);
-    const auto rejected = rejected_.find(key);
-    if (held != held_pairs_.end()) {
-      held->second.at_verify = v;
-    } else if (rejected != rejected_.end()) {
-      Verdict r = v;
-      r.deferred = false;
-      r.accepted = false;
-      r.reason = rejected->second.reason;
-      r.detail = rejected->second.detail;
-      rejected->second = r;
-    }
-  } else if (!v.accepted && v.reason != Reason::kInvalidInput) {
-    // invalid_input is re-derived for a copy (a keyframe may have arrived since).
-    rejected_[key] = v;
-  }
-  return v;
-}
-
-bool Verifier::verifyCopy(const LoopCandidate& c, Clock::time_point t0, Verdict* copy) {
-  const PairKey key(c.query_index, c.match_index);
-  std::ostringstream pair;
-  pair << c.query_index << " -> " << c.match_index;
   size_t qpos = 0, mpos = 0;
-  if (!graph_.checkLoop(c, &qpos, &mpos).empty()) return false;  // verifyLocked says why
-  if (graph_.hasLoop(c.query_index, c.match_index)) {
-    *copy = withNumbers(Verdict::Reject(Reason::kInvalidInput, c,
-                                        "loop " + pair.str() + " is already in the graph: a copy of an accepted loop is "
-                                                     "counted once, not accepted again"),
-                        Verdict(), t0);
-    return true;
-  }
-  const auto held = held_pairs_.find(key);
-  if (held != held_pairs_.end()) {
-    held->second.copies.push_back(c);
-    *copy = withNumbers(Verdict::Defer(c, "a copy of held candidate " + pair.str() +
-                                              ": counted once, decided with it (" + held->second.at_verify.detail +
-                                              ")"),
-                        held->second.at_verify, t0);
-    return true;
-  }
-  const auto rejected = rejected_.find(key);
-  if (rejected != rejected_.end()) {
-    *copy = withNumbers(Verdict::Reject(rejected->second.reason, c,
-                                        "a copy of candidate " + pair.str() + ", rejected earlier: counted once (" +
-                                            rejected->second.detail + ")"),
-                        rejected->second, t0);
-    return true;
-  }
-  return false;
+  // A copy of a held, rejected or committed candidate (verifyLocked says why bad input is bad).
+  if (graph_.checkLoop(c, &qpos, &mpos).empty() && emit_.copy(c, graph_.hasLoop(c.query_index, c.match_index), t0, &v))
+    return v;
+  v = verifyLocked(c, t0);
+  emit_.verified(c, v);
+  return v;
 }
 
 Verdict Verifier::verifyLocked(const LoopCandidate& c, Clock::time_point t0) {
   Verdict measured;  // the numbers gathered on the way to the decision
   measured.threshold = config_.metric.threshold;
-  auto reject = [&](Reason reason, std::string detail) {
-    return withNumbers(Verdict::Reject(reason, c, std::move(detail)), measured, t0);
-  };
+  auto reject = [&](Reason reason, std::string detail) { return emit_.reject(reason, c, std::move(detail), measured, t0); };
   size_t qpos = 0, mpos = 0;
   // A failed test rejects, unless the candidate is held as a rival of accepted loops (revoke_group).
   auto rejectOrHold = [&](const Check& failed) {
     std::string detail = failed.detail;
     if (holdAsRival(c, qpos, mpos, failed.reason, &detail) || holdForGlobal(c, qpos, mpos, failed.reason, &detail))
-      return withNumbers(Verdict::Defer(c, detail), measured, t0);
+      return emit_.defer(c, detail, measured, t0);
     return reject(failed.reason, failed.detail);
   };
 
   const std::string bad = graph_.checkLoop(c, &qpos, &mpos);
   if (!bad.empty()) return reject(Reason::kInvalidInput, bad);
-  if (revoked_.count({c.query_index, c.match_index}))
+  if (emit_.revoked(c))
     return reject(Reason::kUnconfirmed, "this loop was revoked earlier: it is not accepted again");
   const int qseq = graph_.sequenceAt(qpos), mseq = graph_.sequenceAt(mpos);
   if (!graph_.connected(qpos, mpos)) {
@@ -169,12 +105,12 @@ Verdict Verifier::verifyLocked(const LoopCandidate& c, Clock::time_point t0) {
     if (config_.host.confirm_without_prior) {
       s << "held until " << config_.hold.confirm_count << " candidates between them agree (confirm_without_prior)";
       hold(c, qpos, mpos, HoldKind::kNoPrior);
-      return withNumbers(Verdict::Defer(c, s.str()), measured, t0);
+      return emit_.defer(c, s.str(), measured, t0);
     }
     s << (config_.host.accept_without_prior ? "accepted by policy (accept_without_prior)"
                                        : "rejected by policy (accept_without_prior=false)");
     if (config_.host.accept_without_prior)
-      return withNumbers(Verdict::Accept(c, s.str(), Reason::kNoTrajectoryPrior), measured, t0);
+      return emit_.accept(c, s.str(), measured, t0, Reason::kNoTrajectoryPrior);
     return reject(Reason::kNoTrajectoryPrior, s.str());
   }
   if (qseq == 0 && mseq == 0)
@@ -188,7 +124,7 @@ Verdict Verifier::verifyLocked(const LoopCandidate& c, Clock::time_point t0) {
     return rejectOrHold(out.check);
   if (out.hold) {
     hold(c, qpos, mpos, out.kind, out.d2);
-    return withNumbers(Verdict::Defer(c, out.check.detail), measured, t0);
+    return emit_.defer(c, out.check.detail, measured, t0);
   }
   pending_.valid = true;
   pending_.candidate = c;
@@ -197,7 +133,7 @@ Verdict Verifier::verifyLocked(const LoopCandidate& c, Clock::time_point t0) {
   // Only a loop the prior confirmed teaches the drift calibration; an extension's innovation is
   // the drift the prior ruled out, or a false row's offset.
   pending_.decided.calibrates = out.check.passed;
-  return withNumbers(Verdict::Accept(c, out.check.passed ? out.check.detail : extended), measured, t0);
+  return emit_.accept(c, out.check.passed ? out.check.detail : extended, measured, t0);
 }
 
 std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int condense_min_window) {
@@ -208,7 +144,7 @@ std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int 
   if (why.empty() && graph_.sequenceAt(qpos) == 0 && graph_.sequenceAt(mpos) == 0) why = "both in sequence 0";
   if (why.empty() && config_.decision == Decision::kChi2) why = "decision chi2: no trial";  // revisit: the metric trial first
   if (!why.empty()) {
-    const Verdict v = Verdict::Reject(Reason::kInvalidInput, c, why);
+    const Verdict v = emit_.reject(Reason::kInvalidInput, c, why, Verdict(), Clock::now());
     return {v, v};
   }
   auto trialVerdict = [&](int condense) {
@@ -216,8 +152,7 @@ std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int 
     Verdict measured;
     TrialSolution trial;
     const Check d = metricDecision(config_, graph_, c, qpos, mpos, condense, t0, &measured, &trial);
-    Verdict v = d.passed ? Verdict::Accept(c, d.detail) : Verdict::Reject(d.reason, c, d.detail);
-    return withNumbers(v, measured, t0);
+    return emit_.outcome(d, c, measured, t0);
   };
   const Verdict full = trialVerdict(0);
   return {full, trialVerdict(condense_min_window)};
@@ -265,83 +200,27 @@ Status Verifier::commitLocked(const LoopCandidate& c, bool update_estimate) {
 
 // ---- held candidates ------------------------------------------------------------------------
 
-const char* toString(LoopDecision::Kind kind) {
-  switch (kind) {
-    case LoopDecision::Kind::kRelease: return "release";
-    case LoopDecision::Kind::kDrop: return "drop";
-    case LoopDecision::Kind::kRevoke: return "revoke";
-  }
-  return "drop";
-}
-
 std::vector<LoopDecision> Verifier::takeDecisions() {
   std::lock_guard<std::mutex> lock(mutex_);
-  std::vector<LoopDecision> out;
-  out.swap(decisions_);
-  return out;
+  return emit_.take();
 }
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  size_t copies = 0;
-  for (const auto& h : held_pairs_) copies += h.second.copies.size();
-  return held_.size() + global_pool_.size() + copies;
-}
-
-bool Verifier::consistent(const HeldCandidate& a, const HeldCandidate& b) const {
-  return cycleTest(graph_, config_, rule_->driftScale(), a, b) == 1;
+  return held_.size() + emit_.heldCopies();
 }
 
 void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind, double d2) {
-  held_pairs_.emplace(PairKey(c.query_index, c.match_index), HeldPair());
-  HeldCandidate h = heldFor(c);
+  emit_.held(c);
+  HeldCandidate h = loops_.heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;
   h.kind = kind;
   h.d2 = d2;
-  held_.add(h, [this](const HeldCandidate& a, const HeldCandidate& b) { return consistent(a, b); });
+  held_.add(h, loops_);
   // A revisit hypothesis is judged on keyframe arrival (addKeyframe), not here: its joint trial
   // (all its loops) would otherwise land on this verify()'s time (the cost of verify(), docs/results.md).
   if (kind != HoldKind::kRevisit) settle(false);
-}
-
-void Verifier::decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict) {
-  LoopDecision d;
-  d.kind = kind;
-  d.candidate = c;
-  d.verdict = std::move(verdict);
-  decisions_.push_back(d);
-  // Its copies get the same decision, right after it.
-  const PairKey key(c.query_index, c.match_index);
-  std::vector<LoopCandidate> copies;
-  if (kind == LoopDecision::Kind::kRevoke) {
-    const auto released = released_copies_.find(key);
-    if (released == released_copies_.end()) return;
-    copies.swap(released->second);
-    released_copies_.erase(released);
-  } else {
-    const auto held = held_pairs_.find(key);
-    if (held == held_pairs_.end()) return;
-    copies.swap(held->second.copies);
-    if (kind == LoopDecision::Kind::kDrop) {
-      Verdict r = held->second.at_verify;  // its numbers at verify, the drop's outcome
-      r.deferred = false;
-      r.accepted = false;
-      r.reason = d.verdict.reason;
-      r.detail = d.verdict.detail;
-      rejected_[key] = r;
-    } else if (!copies.empty()) {
-      released_copies_[key] = copies;
-    }
-    held_pairs_.erase(held);
-  }
-  for (const LoopCandidate& copy : copies) {
-    LoopDecision e = d;
-    e.candidate = copy;
-    e.verdict.query_index = copy.query_index;
-    e.verdict.match_index = copy.match_index;
-    decisions_.push_back(e);
-  }
 }
 
 void Verifier::drop(const HeldGroup& group, const std::string& why, bool contradicted) {
@@ -366,7 +245,7 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
   const bool retest = !contradicted && h.kind == HoldKind::kRevisit && h.revision != graph_.revision() &&
                       graph_.connected(h.query_pos, h.match_pos);
   if (retest && !retestNow()) {
-    held_.wait(h, why);  // tested alone on the next keyframe's arrival (settleWaiting())
+    held_.wait(h, why);  // tested alone on the next keyframe's arrival (nextWaiting())
     return;
   }
   if (retest) ++retest_.count;
@@ -374,19 +253,16 @@ void Verifier::dropMember(const HeldCandidate& h, const std::string& why, bool c
     pending_.valid = false;
     const Status s = commitLocked(h.candidate, true);
     if (s.ok) {
-      decide(LoopDecision::Kind::kRelease, h.candidate,
-             Verdict::Accept(h.candidate, "its revisit hypothesis was not released (" + why +
-                                              "); tested alone again: " + again));
+      emit_.release(h.candidate, "its revisit hypothesis was not released (" + why + "); tested alone again: " + again);
       return;
     }
   }
   if (!addToGlobalPool(h))
-    decide(LoopDecision::Kind::kDrop, h.candidate,
-           Verdict::Reject(Reason::kUnconfirmed, h.candidate, retest ? why + "; tested alone again: " + again : why));
+    emit_.drop(h.candidate, retest ? why + "; tested alone again: " + again : why);
 }
 
 bool Verifier::retestNow() const {
-  // Called on keyframe arrival only (settle(true), settleWaiting()). While the keyframe's work is
+  // Called on keyframe arrival only (settle(true), nextWaiting()). While the keyframe's work is
   // within revisit_retest_budget_ms; the first re-test of a keyframe always runs (each is bounded
   // by time_budget_ms itself), so every waiting member is tested in turn however busy the
   // keyframes are.
@@ -395,53 +271,29 @@ bool Verifier::retestNow() const {
 }
 
 void Verifier::settle(bool revisit) {
-  HeldCandidates::Actions act;
-  act.rival_targets = [this](const HeldGroup& g) { return rivalTargets(g); };
-  act.settle_rivals = [this](const HeldGroup& g, const std::vector<LoopCandidate>& loops) { settleRivals(g, loops); };
-  act.release = [this](const HeldGroup& g) { release(g); };
-  act.drop = [this](const HeldGroup& g, const std::string& why, bool contradicted) { drop(g, why, contradicted); };
-  act.judge = [this](const HeldGroup& g, std::string* why) { return judgeRevisit(g, why); };
-  act.misfit = [this](const HeldGroup& g) { return rule_->misfit(g); };
-  held_.settle(graph_.keyframeCount(), act, revisit);
-}
-
-bool Verifier::judgeRevisit(const HeldGroup& group, std::string* why) {
-  // A hypothesis that contradicts accepted loops of its stretch is not released: the accepted
-  // loops passed alone or with their own revisit, and a look-alike row contradicts them. Only
-  // loops whose matches lie within the stretch too: where a revisit's matches jump across the
-  // start of a loop run (lap 3's first loops match lap 1's start, lap 2's last its end), the
-  // VIO odometry between the matches is a whole lap, whose drift the model underrates; found
-  // inside loop_fusion, where it kept a third lap from closing (docs/vins-fusion.md).
-  size_t contradicting = 0;
-  LoopCandidate example;
-  for (const HeldCandidate& h : group) {
-    const std::vector<LoopCandidate> against = contradicted(h, static_cast<size_t>(config_.revisit.revisit_stretch), true);
-    if (!against.empty()) {
-      ++contradicting;
-      example = against.front();
+  // The store says what is due, one group at a time; each is acted on before the next is asked
+  // for (a release or a revocation changes the graph the store's tests read).
+  held_.beginSettle(graph_.keyframeCount(), revisit);
+  HeldCandidates::Due due;
+  while (held_.nextDue(loops_, &due)) {
+    switch (due.action) {
+      case HeldCandidates::Due::Action::kRelease: {
+        // The judge's text opens with the hypothesis' size and loops, which the release names itself.
+        const size_t body = due.why.find("): ");
+        release(due.group, body != std::string::npos ? due.why.substr(body + 3) : std::string());
+        for (const HeldGroup& g : due.dropped) drop(g, due.dropped_why, true);
+        break;
+      }
+      case HeldCandidates::Due::Action::kSettleRivals: settleRivals(due.group, due.targets); break;
+      case HeldCandidates::Due::Action::kDrop: drop(due.group, due.why, false); break;
     }
   }
-  if (2 * contradicting > group.size()) {
-    std::ostringstream s;
-    s << "revisit hypothesis of " << group.size() << ": " << contradicting
-      << " of its members contradict accepted loops of their stretch (e.g. " << example.query_index << "->"
-      << example.match_index << ")";
-    *why = s.str();
-    return false;
-  }
-  const bool passed = rule_->judge(group, why);
-  // The rule's text opens with the hypothesis' size and loops, which the release names itself.
-  const size_t body = why->find("): ");
-  judged_ = passed && body != std::string::npos ? why->substr(body + 3) : std::string();
-  return passed;
 }
 
-void Verifier::release(const HeldGroup& group) {
+void Verifier::release(const HeldGroup& group, const std::string& judged) {
   std::ostringstream why;
   const bool revisit = group.front().kind == HoldKind::kRevisit;
   const bool global = group.front().kind == HoldKind::kGlobal;
-  const std::string judged = revisit ? judged_ : std::string();
-  judged_.clear();
   if (revisit)
     why << "released with its revisit hypothesis: " << group.size() << " mutually consistent candidates (loops ";
   else if (global)
@@ -460,19 +312,17 @@ void Verifier::release(const HeldGroup& group) {
     Decided decided;
     if (h.kind == HoldKind::kWeakPrior && graph_.connected(h.query_pos, h.match_pos) &&
         !rule_->recheck(h.candidate, h.query_pos, h.match_pos, &decided)) {
-      decide(LoopDecision::Kind::kDrop, h.candidate,
-             Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed with its revisit but no longer consistent with the graph"));
+      emit_.drop(h.candidate, "confirmed with its revisit but no longer consistent with the graph");
       continue;
     }
     const bool learn = revisit && rule_->recheck(h.candidate, h.query_pos, h.match_pos, &decided);
     pending_.valid = false;
     const Status s = commitLocked(h.candidate, false);
     if (!s.ok) {
-      decide(LoopDecision::Kind::kDrop, h.candidate,
-             Verdict::Reject(Reason::kUnconfirmed, h.candidate, "confirmed but not committed: " + s.message));
+      emit_.drop(h.candidate, "confirmed but not committed: " + s.message);
     } else {
       if (learn) rule_->learn(decided);  // what a confirmed revisit says about the drift
-      decide(LoopDecision::Kind::kRelease, h.candidate, Verdict::Accept(h.candidate, why.str()));
+      emit_.release(h.candidate, why.str());
       committed.push_back(&h);
       if (revisit || global) first_match = std::min(first_match, h.match_pos);
     }

@@ -48,10 +48,12 @@
 // Verdict with reason kInvalidInput.
 #pragma once
 
+#include "rover_loop_fusion/core/accepted_loops.h"
 #include "rover_loop_fusion/core/decision_rule.h"
 #include "rover_loop_fusion/core/held_candidates.h"
 #include "rover_loop_fusion/core/pose_graph.h"
 #include "rover_loop_fusion/core/types.h"
+#include "rover_loop_fusion/core/verdict_emitter.h"
 
 #include <Eigen/Geometry>
 
@@ -133,46 +135,22 @@ class Verifier {
 
  private:
   Verdict verifyLocked(const LoopCandidate& c, std::chrono::steady_clock::time_point t0);
-  /// A copy of a held, rejected or committed candidate (see the protocol above): its verdict in
-  /// *copy, true; false if `c` is not a copy.
-  bool verifyCopy(const LoopCandidate& c, std::chrono::steady_clock::time_point t0, Verdict* copy);
   /// Holds a candidate (a deferred verdict) and settles what is due.
   void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind, double d2 = 0.0);
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
   /// revoke_group: holds a candidate rejected for `reason` as a rival if it contradicts an
   /// accepted loop of its stretch (appends why to *detail); false if it stays rejected.
   bool holdAsRival(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
-  /// The accepted loops of the stretch of `h` (queries within `window` keyframes) that the
-  /// cycle test (along the VIO odometry) finds inconsistent with it.
-  /// With `near_matches`, only loops whose match also lies within `window` keyframes of h's:
-  /// the cycle test's odometry legs are then both short, as its covariance assumes.
-  std::vector<LoopCandidate> contradicted(const HeldCandidate& h, size_t window, bool near_matches = false) const;
-  /// The accepted loops of that stretch (of h's query segment) that the cycle test finds
-  /// consistent with h within `max_residual` metres of translation (agree), and those it finds
-  /// inconsistent or off by more (contradict); loops whose cycle is not one chain in neither.
-  struct StretchLoops {
-    std::vector<LoopCandidate> agree, contradict;
-  };
-  StretchLoops stretchLoops(const HeldCandidate& h, size_t window, bool near_matches,
-                            double max_residual = std::numeric_limits<double>::infinity()) const;
   /// decision revisit, revisit_extend: whether a candidate the rule rejected for `failed`
   /// (innovation gate or score) extends accepted loops of its revisit (core/types.h); if so, its
   /// trial is in *decided (run here if the gate stopped it before one), *detail says why.
   bool extendsRevisit(const LoopCandidate& c, size_t query_pos, size_t match_pos, const Check& failed,
                       std::chrono::steady_clock::time_point t0, Verdict* measured, Decided* decided,
                       std::string* detail);
-  /// decision revisit: the joint test of a hypothesis (Actions::judge): it must not contradict
-  /// the accepted loops of its stretch, and must pass the rule's test against the prior. What a
-  /// passed test found is kept for the release's verdicts (judged_).
-  bool judgeRevisit(const HeldGroup& group, std::string* why);
-  /// The accepted loops a group of rivals contradicts: those of its stretch that most of its
-  /// members are inconsistent with.
-  std::vector<LoopCandidate> rivalTargets(const HeldGroup& group) const;
   /// A confirmed group of rivals that outnumbers the `loops` it contradicts: revoke them and
   /// release the rivals that pass against the graph without them, or put everything back and
   /// drop the group.
   void settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops);
-  HeldCandidate heldFor(const LoopCandidate& c) const;
   /// global_check: holds a candidate rejected for `reason` in the global pool (appends why to
   /// *detail); false if it stays rejected (core/global_release.cpp).
   bool holdForGlobal(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
@@ -184,10 +162,13 @@ class Verifier {
   /// inliers the other loops pin down, drops what waited longer than global_window. A warning
   /// if it stopped at global_budget_ms (nothing released; the next pass tries again).
   Status globalPass();
-  /// Releases groups that are confirmed, drops those that expired (decisions_); the revisit
-  /// hypotheses too if `revisit` (on keyframe arrival only: their joint trials).
+  /// Acts on what the store of held candidates says is due: releases groups that are confirmed,
+  /// drops those that expired; the revisit hypotheses too if `revisit` (on keyframe arrival
+  /// only: their joint trials).
   void settle(bool revisit);
-  void release(const HeldGroup& group);
+  /// Commits a confirmed group and emits its releases (`judged`: what a revisit hypothesis'
+  /// joint test found).
+  void release(const HeldGroup& group, const std::string& judged = std::string());
   /// Drops a group's members, each tested alone first where loops were committed since it was
   /// held; a revisit member whose hypothesis failed before any such commit waits (HeldCandidates::wait()).
   void drop(const HeldGroup& group, const std::string& why, bool contradicted);
@@ -200,9 +181,6 @@ class Verifier {
   /// `ms`, or 0 (no bound) when time_budget_ms 0 lifts every budget (verdicts independent of the
   /// machine's load: the benchmarks).
   double arrivalBudgetMs(double ms) const { return config_.trial.time_budget_ms > 0 ? ms : 0.0; }
-  /// The cycle test of two held candidates (core/cycle_test.h) passes.
-  bool consistent(const HeldCandidate& a, const HeldCandidate& b) const;
-  void decide(LoopDecision::Kind kind, const LoopCandidate& c, Verdict verdict);
   /// What the last verify() that accepted worked out, for commit() to keep.
   struct Pending {
     bool valid = false;
@@ -216,19 +194,15 @@ class Verifier {
   KeyframeGraph graph_;
   std::unique_ptr<DecisionRule> rule_;
   Pending pending_;
-  HeldCandidates held_;
-  /// What the last passed judgeRevisit() found (its fit, trial and bound): HeldCandidates
-  /// releases a hypothesis right after the judge passed it, and release() reports it.
-  std::string judged_;
+  AcceptedLoops loops_;  ///< the tests of held candidates against the accepted loops
+  HeldCandidates held_;  ///< every held candidate, whatever it waits for
   /// The re-tests of the addKeyframe() running (retestNow()).
   struct RetestBudget {
     std::chrono::steady_clock::time_point started;
     size_t count = 0;  ///< re-tests run on this keyframe
   };
   RetestBudget retest_;
-  std::vector<HeldCandidate> global_pool_;  ///< global_check: oldest first
-  size_t last_global_pass_ = 0;             ///< keyframes at the last global pass
-  uint64_t global_pool_revision_ = 0;       ///< changes with every change of global_pool_
+  size_t last_global_pass_ = 0;  ///< global_check: keyframes at the last global pass
   /// What the last global pass was given: one over the same loops, estimate, drift scale and
   /// pool decides the same, and is skipped unless a candidate's global_window ends.
   struct GlobalInputs {
@@ -240,17 +214,8 @@ class Verifier {
     }
   };
   GlobalInputs last_global_inputs_;
-  std::vector<LoopDecision> decisions_;    ///< not yet taken
-  std::set<std::pair<int64_t, int64_t>> revoked_;  ///< (query, match) of revoked loops: never again
-  using PairKey = std::pair<int64_t, int64_t>;  ///< (query, match)
-  /// A held candidate's verdict at verify and its copies, which get its decision.
-  struct HeldPair {
-    Verdict at_verify;
-    std::vector<LoopCandidate> copies;
-  };
-  std::map<PairKey, HeldPair> held_pairs_;
-  std::map<PairKey, std::vector<LoopCandidate>> released_copies_;  ///< revoked with their loop
-  std::map<PairKey, Verdict> rejected_;  ///< rejected or dropped: what a copy gets
+  /// Every verdict and decision leaves through it; it keeps the queue and the copies' bookkeeping.
+  VerdictEmitter emit_;
 };
 
 }  // namespace core
