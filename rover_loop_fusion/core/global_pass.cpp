@@ -32,6 +32,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <vector>
@@ -57,7 +58,98 @@ double tlsWeight(double r2, double c2, double mu) {
   return std::min(1.0, std::max(0.0, std::sqrt(c2 * mu * (mu + 1.0) / r2) - mu));
 }
 
+constexpr size_t kNoEdge = std::numeric_limits<size_t>::max();
+
+enum class Outcome { kOk, kFailed, kLate };
+
+/// cg solved by least squares, then graduated non-convexity (truncated least squares) from that
+/// solution on: the weights *w of the loop edges `edge` (kNoEdge: not in the graph). kFailed: a
+/// solve failed; kLate: the budget ran out.
+Outcome graduate(CondensedGraph& cg, const std::vector<size_t>& edge, double inlier_chi2,
+                 const std::function<bool()>& late, std::vector<double>* w) {
+  bool ok = false;
+  cg.solve(4 * kStepIterations, kTolerance, &ok);
+  if (late()) return Outcome::kLate;
+  if (!ok) return Outcome::kFailed;
+  double max_r2 = 0.0;
+  for (size_t e : edge)
+    if (e != kNoEdge) max_r2 = std::max(max_r2, cg.chi2(e));
+  w->assign(edge.size(), 1.0);
+  if (!(max_r2 > inlier_chi2)) return Outcome::kOk;
+  double mu = inlier_chi2 / std::max(1e-9, 2.0 * max_r2 - inlier_chi2);
+  for (int step = 0; step < kGncMaxSteps && ok; ++step) {
+    bool binary = true;
+    for (size_t k = 0; k < edge.size(); ++k) {
+      if (edge[k] == kNoEdge) continue;
+      (*w)[k] = tlsWeight(cg.chi2(edge[k]), inlier_chi2, mu);
+      cg.setWeight(edge[k], (*w)[k]);
+      binary = binary && ((*w)[k] < 1e-6 || (*w)[k] > 1.0 - 1e-6);
+    }
+    cg.solve(kStepIterations, kTolerance, &ok);
+    if (late()) return Outcome::kLate;
+    if ((binary && step > 0) || mu > kGncMaxMu) break;
+    mu *= kGncFactor;
+  }
+  return ok ? Outcome::kOk : Outcome::kFailed;
+}
+
+/// An inlier loop (edge k of cg, from anchor gm to gq) against the others: cg solved without it,
+/// its innovation's Mahalanobis distance and the largest position std of the relative pose
+/// (r->d2, r->sigma; r->pinned when both are finite). pitch, roll: the match keyframe's.
+Outcome leaveOneOut(const CondensedGraph& cg, size_t k, int gm, int gq, size_t anchors, double pitch, double roll,
+                    const Eigen::Matrix4d& loop_cov, const std::function<bool()>& late, GlobalLoop* r) {
+  CondensedGraph without = cg;
+  without.setWeight(k, 0.0);
+  bool solved = false;
+  without.solve(2 * kStepIterations, kTolerance, &solved);
+  if (late()) return Outcome::kLate;
+  if (!solved) return Outcome::kOk;
+  const Eigen::Vector4d nu = without.residual(k);  // prediction minus the candidate (yaw wrapped)
+  for (size_t i = 0; i < anchors; ++i) without.setFixed(static_cast<int>(i), false);
+  const Eigen::Matrix3d Rm = yawPitchRollToRotation(without.state(gm).yaw, pitch, roll);
+  Eigen::Matrix4d C;
+  if (!without.marginal(gm, gq, Rm, &C)) return Outcome::kOk;
+  r->d2 = mahalanobis(nu, C + loop_cov);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(C.topLeftCorner<3, 3>());
+  r->sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
+  r->pinned = std::isfinite(r->d2) && std::isfinite(r->sigma);
+  return Outcome::kOk;
+}
+
 }  // namespace
+
+bool KeyframeGraph::Impl::globalGraph(int component, const std::vector<size_t>& matches,
+                                      const std::vector<size_t>& queries, const std::vector<const LoopCandidate*>& loops,
+                                      double variance_scale, CondensedGraph* cg, std::vector<size_t>* anchors,
+                                      std::vector<size_t>* edge, size_t* chains) const {
+  std::vector<size_t> extra;
+  for (size_t k = 0; k < matches.size(); ++k) {
+    extra.push_back(matches[k]);
+    extra.push_back(queries[k]);
+  }
+  CondenseOptions options;
+  options.variance_scale = variance_scale;
+  if (!condense(component, extra, options, cg, anchors)) return false;
+  const std::vector<size_t>& a = *anchors;
+  // condense() adds the chains of odometry first, then the accepted loops.
+  *chains = cg->edgeCount() - loopReps(component, 0, cfg.chi2.max_loop_anchors).size();
+  bool any_fixed = false;
+  for (size_t p : a) any_fixed = any_fixed || kfs[p].sequence == 0;
+  if (!any_fixed) cg->setFixed(0, true);  // the oldest anchor holds the gauge
+  auto id = [&](size_t p) { return static_cast<int>(std::lower_bound(a.begin(), a.end(), p) - a.begin()); };
+  const Eigen::Matrix4d loop_cov = loopCovariance();
+  edge->assign(loops.size(), kNoEdge);
+  for (size_t k = 0; k < loops.size(); ++k) {
+    CondensedEdge e;
+    e.from = id(matches[k]);
+    e.to = id(queries[k]);
+    e.t = loops[k]->relative_t;
+    e.yaw = loops[k]->relative_yaw;
+    e.covariance = loop_cov;
+    if (cg->addEdge(e)) (*edge)[k] = cg->edgeCount() - 1;
+  }
+  return true;
+}
 
 bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidates, double inlier_chi2,
                                       double tear_chi2, double variance_scale, const std::vector<bool>& test_alone,
@@ -67,7 +159,7 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
   out->assign(candidates.size(), GlobalLoop());
   if (timed_out) *timed_out = false;
   // The budget (Verifier::globalPass): checked after every solve, the largest steps of a pass.
-  auto late = [&]() {
+  const std::function<bool()> late = [&]() {
     if (deadline == std::chrono::steady_clock::time_point::max() || std::chrono::steady_clock::now() < deadline)
       return false;
     if (timed_out) *timed_out = true;
@@ -88,67 +180,28 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
   const Eigen::Matrix4d loop_cov = m.loopCovariance();
   for (const auto& kv : by_component) {
     const std::vector<Ends>& ends = kv.second;
-    std::vector<size_t> extra;
+    std::vector<size_t> matches, queries;
+    std::vector<const LoopCandidate*> loops;
     for (const Ends& e : ends) {
-      extra.push_back(e.match);
-      extra.push_back(e.query);
+      matches.push_back(e.match);
+      queries.push_back(e.query);
+      loops.push_back(&candidates[e.i]);
     }
     CondensedGraph cg;
-    std::vector<size_t> a;
-    Impl::CondenseOptions options;
-    options.variance_scale = variance_scale;
-    if (!m.condense(kv.first, extra, options, &cg, &a)) {
+    std::vector<size_t> a, edge;
+    size_t chains = 0;
+    if (!m.globalGraph(kv.first, matches, queries, loops, variance_scale, &cg, &a, &edge, &chains)) {
       all_ok = false;
       continue;
     }
-    // condense() adds the chains of odometry first, then the accepted loops.
-    const size_t chains = cg.edgeCount() - m.loopReps(kv.first, 0, m.cfg.chi2.max_loop_anchors).size();
-    bool any_fixed = false;
-    for (size_t p : a) any_fixed = any_fixed || m.kfs[p].sequence == 0;
-    if (!any_fixed) cg.setFixed(0, true);  // the oldest anchor holds the gauge
     auto id = [&](size_t p) { return static_cast<int>(std::lower_bound(a.begin(), a.end(), p) - a.begin()); };
-    std::vector<size_t> edge(ends.size(), std::numeric_limits<size_t>::max());
-    for (size_t k = 0; k < ends.size(); ++k) {
-      const LoopCandidate& c = candidates[ends[k].i];
-      CondensedEdge e;
-      e.from = id(ends[k].match);
-      e.to = id(ends[k].query);
-      e.t = c.relative_t;
-      e.yaw = c.relative_yaw;
-      e.covariance = loop_cov;
-      if (cg.addEdge(e)) edge[k] = cg.edgeCount() - 1;
-    }
-    bool ok = false;
-    cg.solve(4 * kStepIterations, kTolerance, &ok);
-    if (late()) return false;
-    if (!ok) {
+    // Least squares, then graduated non-convexity from its solution on.
+    std::vector<double> w;
+    const Outcome graduated = graduate(cg, edge, inlier_chi2, late, &w);
+    if (graduated == Outcome::kLate) return false;
+    if (graduated == Outcome::kFailed) {
       all_ok = false;
       continue;
-    }
-    // Graduated non-convexity from the least-squares solution on.
-    double max_r2 = 0.0;
-    for (size_t e : edge)
-      if (e != std::numeric_limits<size_t>::max()) max_r2 = std::max(max_r2, cg.chi2(e));
-    std::vector<double> w(ends.size(), 1.0);
-    if (max_r2 > inlier_chi2) {
-      double mu = inlier_chi2 / std::max(1e-9, 2.0 * max_r2 - inlier_chi2);
-      for (int step = 0; step < kGncMaxSteps && ok; ++step) {
-        bool binary = true;
-        for (size_t k = 0; k < ends.size(); ++k) {
-          if (edge[k] == std::numeric_limits<size_t>::max()) continue;
-          w[k] = tlsWeight(cg.chi2(edge[k]), inlier_chi2, mu);
-          cg.setWeight(edge[k], w[k]);
-          binary = binary && (w[k] < 1e-6 || w[k] > 1.0 - 1e-6);
-        }
-        cg.solve(kStepIterations, kTolerance, &ok);
-        if (late()) return false;
-        if ((binary && step > 0) || mu > kGncMaxMu) break;
-        mu *= kGncFactor;
-      }
-      if (!ok) {
-        all_ok = false;
-        continue;
-      }
     }
     // Where the solution tears the odometry: chains bent beyond tear_chi2 (a row of look-alikes
     // that agree with each other is absorbed by the odometry, whose loss is not robust).
@@ -156,7 +209,7 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
     for (size_t e = 0; e < chains; ++e) torn[e] = !(cg.chi2(e) <= tear_chi2);
     // Inliers, each against the others (leave one out).
     for (size_t k = 0; k < ends.size(); ++k) {
-      if (edge[k] == std::numeric_limits<size_t>::max()) continue;
+      if (edge[k] == kNoEdge) continue;
       GlobalLoop& r = (*out)[ends[k].i];
       r.chi2 = cg.chi2(edge[k]);
       r.inlier = w[k] > 0.5 && r.chi2 <= inlier_chi2;
@@ -170,22 +223,9 @@ bool KeyframeGraph::globalConsistency(const std::vector<LoopCandidate>& candidat
         r.torn = !one_segment || (ce.from >= gm && ce.to <= gq);
       }
       if (r.torn || (!test_alone.empty() && !test_alone[ends[k].i])) continue;
-      CondensedGraph without = cg;
-      without.setWeight(edge[k], 0.0);
-      bool solved = false;
-      without.solve(2 * kStepIterations, kTolerance, &solved);
-      if (late()) return false;
-      if (!solved) continue;
-      const Eigen::Vector4d nu = without.residual(edge[k]);  // prediction minus the candidate (yaw wrapped)
-      for (size_t i = 0; i < a.size(); ++i) without.setFixed(static_cast<int>(i), false);
       const Impl::Keyframe& km = m.kfs[ends[k].match];
-      const Eigen::Matrix3d Rm = yawPitchRollToRotation(without.state(gm).yaw, km.pitch, km.roll);
-      Eigen::Matrix4d C;
-      if (!without.marginal(gm, gq, Rm, &C)) continue;
-      r.d2 = mahalanobis(nu, C + loop_cov);
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(C.topLeftCorner<3, 3>());
-      r.sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
-      r.pinned = std::isfinite(r.d2) && std::isfinite(r.sigma);
+      if (leaveOneOut(cg, edge[k], gm, gq, a.size(), km.pitch, km.roll, loop_cov, late, &r) == Outcome::kLate)
+        return false;
     }
   }
   return all_ok;

@@ -294,6 +294,15 @@ struct KeyframeGraph::Impl {
   /// The segment root of the keyframe at `pos` (root() without path compression).
   int componentOf(size_t pos) const;
 
+  // ---- global pass (global_pass.cpp) --------------------------------------------------------
+  /// The condensed graph of `component` for the global pass: its chains and accepted loops, the
+  /// gauge held, and an edge per candidate loop (matches[k] -> queries[k], kfs positions;
+  /// (*edge)[k] its edge, or SIZE_MAX if it could not be added); *chains: the odometry chains
+  /// (the first edges). false if it cannot be condensed.
+  bool globalGraph(int component, const std::vector<size_t>& matches, const std::vector<size_t>& queries,
+                   const std::vector<const LoopCandidate*>& loops, double variance_scale, CondensedGraph* cg,
+                   std::vector<size_t>* anchors, std::vector<size_t>* edge, size_t* chains) const;
+
   // ---- trials (trial_solve.cpp; the deadline and cost model: trial_budget.h) ---------------
   void addBlocks(Trial& tr, KeyframeState& s, bool constant);
   double* rotBlock(KeyframeState& s) const { return fourDof() ? &s.yaw : s.q; }
