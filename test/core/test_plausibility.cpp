@@ -32,7 +32,9 @@ Outcome replay(const std::string& scenario, int64_t edited_index, Edit edit, boo
   sim::Scenario s;
   std::string error;
   EXPECT_TRUE(sim::loadScenario(scenario, &s, &error)) << error;
-  Verifier v;
+  core::VerifierConfig cfg;
+  cfg.trial.time_budget_ms = 0.0;  // the verdicts must not depend on the machine's load
+  Verifier v(cfg);
   Outcome o;
   size_t next = 0;
   for (sim::ScenarioKeyframe k : s.keyframes) {
