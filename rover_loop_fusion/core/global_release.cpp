@@ -1,5 +1,6 @@
 // Decision revisit's global pass on the verifier's side (global_check; the solve itself:
-// core/global_pass.cpp). What the per-candidate test rejects for contradicting the graph, and
+// core/global_pass.cpp). What the per-candidate test rejects for contradicting the graph (held by
+// the hold stage, core/stage_hold.cpp), and
 // the members of revisit hypotheses that were dropped, wait in a pool; every global_period
 // keyframes the pool is judged against every loop at once, and an inlier that the other loops
 // pin down, that the prior of the accepted loops does not rule out and that no rival of its
@@ -20,11 +21,6 @@ namespace rover_loop_fusion {
 namespace core {
 
 namespace {
-
-bool contradictsTheGraph(Reason reason) {
-  return reason == Reason::kInnovationAboveBound || reason == Reason::kScoreAboveThreshold ||
-         reason == Reason::kInconsistentWithDrift;
-}
 
 /// What one global pass worked out over the pool, candidate by candidate (in pool order).
 struct Pass {
@@ -122,19 +118,6 @@ std::string notReleased(const GlobalConfig& g, const std::vector<HeldCandidate>&
 }
 
 }  // namespace
-
-bool Verifier::holdForGlobal(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
-  if (!config_.global.global_check || config_.decision != Decision::kRevisit || !contradictsTheGraph(reason))
-    return false;
-  HeldCandidate h = loops_.heldFor(c);
-  h.query_pos = qpos;
-  h.match_pos = mpos;
-  h.kind = HoldKind::kGlobal;
-  if (!addToGlobalPool(h)) return false;
-  emit_.held(c);
-  *detail += "; held for the global pass (global_check)";
-  return true;
-}
 
 bool Verifier::addToGlobalPool(const HeldCandidate& held) {
   if (!config_.global.global_check || config_.decision != Decision::kRevisit) return false;

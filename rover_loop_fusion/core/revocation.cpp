@@ -1,8 +1,7 @@
 // Revocation (revoke_group, core/verifier.h): a candidate rejected for contradicting the graph
-// that is inconsistent with an accepted loop of its stretch is held as a rival; a confirmed group
-// of rivals is decided against the graph without the loops it contradicts. Also decision
-// revisit's extension of a revisit by its accepted loops (extendsRevisit()); both ask the
-// accepted loops (core/accepted_loops.h).
+// that is inconsistent with an accepted loop of its stretch is held as a rival (the hold stage,
+// core/stage_hold.cpp); a confirmed group of rivals is decided here against the graph without
+// the loops it contradicts (asking the accepted loops, core/accepted_loops.h).
 #include "rover_loop_fusion/core/verifier.h"
 
 #include "rover_loop_fusion/core/decision.h"
@@ -57,54 +56,6 @@ std::string fitsWorse(const KeyframeGraph& graph, const VerifierConfig& config, 
 }
 
 }  // namespace
-
-bool Verifier::extendsRevisit(const LoopCandidate& c, size_t qpos, size_t mpos, const Check& failed,
-                              std::chrono::steady_clock::time_point t0, Verdict* measured, Decided* decided,
-                              std::string* detail) {
-  if (config_.decision != Decision::kRevisit || config_.revisit.revisit_extend <= 0) return false;
-  if (failed.reason != Reason::kInnovationAboveBound && failed.reason != Reason::kScoreAboveThreshold) return false;
-  // Both legs short (matches within the stretch too): what X made of the accepted loops plays no part.
-  const AcceptedLoops::StretchLoops loops = loops_.stretchLoops(
-      loops_.heldFor(c), static_cast<size_t>(config_.revisit.revisit_stretch), true, config_.revisit.revisit_extend_residual);
-  if (!loops.contradict.empty() || loops.agree.size() < static_cast<size_t>(config_.revisit.revisit_extend))
-    return false;
-  const int agree = static_cast<int>(loops.agree.size());
-  const LoopCandidate& example = loops.agree.front();
-  std::ostringstream s;
-  s.precision(3);
-  s << std::fixed << failed.detail << "; extends " << agree << " accepted loop(s) of its revisit (e.g. "
-    << example.query_index << "->" << example.match_index
-    << "): their cycles along the VIO odometry close within revisit_extend_residual, none contradicts it";
-  if (failed.reason == Reason::kInnovationAboveBound) {  // the gate stopped it before its trial
-    runTrial(config_, graph_, c, qpos, mpos, -1, t0, measured, &decided->solution);
-    if (!measured->converged) return false;  // no answer from the trial: fail closed
-    s << "; its trial converged (score " << measured->score << " m)";
-  }
-  *detail = s.str();
-  return true;
-}
-
-bool Verifier::holdAsRival(const LoopCandidate& c, size_t qpos, size_t mpos, Reason reason, std::string* detail) {
-  if (config_.hold.revoke_group <= 0) return false;
-  if (reason != Reason::kInnovationAboveBound && reason != Reason::kScoreAboveThreshold &&
-      reason != Reason::kInconsistentWithDrift)
-    return false;
-  HeldCandidate h;
-  h.candidate = c;
-  h.query_pos = qpos;
-  h.match_pos = mpos;
-  const std::vector<LoopCandidate> against = loops_.contradicted(h, static_cast<size_t>(config_.hold.confirm_stretch));
-  if (against.empty()) return false;
-  std::ostringstream s;
-  s << *detail << "; it contradicts " << against.size() << " accepted loop(s) of its stretch (";
-  for (size_t i = 0; i < against.size() && i < 3; ++i)
-    s << (i ? ", " : "") << against[i].query_index << "->" << against[i].match_index;
-  s << (against.size() > 3 ? ", ..." : "") << "): held as a rival until revoke_group=" << config_.hold.revoke_group
-    << " agree";
-  *detail = s.str();
-  hold(c, qpos, mpos, HoldKind::kRival);
-  return true;
-}
 
 void Verifier::settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops) {
   pending_.valid = false;  // the graph changes below

@@ -22,7 +22,12 @@ set(ROVER_CORE_SOURCES
   cycle_test.cpp
   parameters.cpp
   parameter_table.cpp
+  copies.cpp
   verdict_emitter.cpp
+  stage_input.cpp
+  stage_prior.cpp
+  stage_decide.cpp
+  stage_hold.cpp
   verifier.cpp
   revocation.cpp
   global_release.cpp

@@ -66,74 +66,36 @@ Status Verifier::addKeyframe(int64_t index, double stamp, int sequence, const Ei
 Verdict Verifier::verify(const LoopCandidate& c) {
   const auto t0 = Clock::now();
   std::lock_guard<std::mutex> lock(mutex_);
-  Verdict v;
-  size_t qpos = 0, mpos = 0;
-  // A copy of a held, rejected or committed candidate (verifyLocked says why bad input is bad).
-  if (graph_.checkLoop(c, &qpos, &mpos).empty() && emit_.copy(c, graph_.hasLoop(c.query_index, c.match_index), t0, &v))
-    return v;
-  v = verifyLocked(c, t0);
-  emit_.verified(c, v);
+  // The stages, once each, in order; the first that says more than "next" decides.
+  Passage p(c, t0, config_.metric.threshold);
+  StageOutcome out = input_.run(&p);     // bad input: invalid_input
+  if (out.next()) out = copies_.run(&p);  // a copy of a held, rejected or committed candidate
+  if (out.next()) out = prior_.run(p);    // no trajectory prior: the host's policy
+  if (out.next()) out = decide_.run(&p);  // the gate, the trial and its score (or chi2)
+  const StageOutcome failed = out;
+  out = act(&p, hold_stage_.run(p, failed), failed);  // a rejection held as a rival or for the global pass
+  const Verdict v = emit_.verdict(p, out);
+  if (!out.copy) copies_.verified(c, v);
   return v;
 }
 
-Verdict Verifier::verifyLocked(const LoopCandidate& c, Clock::time_point t0) {
-  Verdict measured;  // the numbers gathered on the way to the decision
-  measured.threshold = config_.metric.threshold;
-  auto reject = [&](Reason reason, std::string detail) { return emit_.reject(reason, c, std::move(detail), measured, t0); };
-  size_t qpos = 0, mpos = 0;
-  // A failed test rejects, unless the candidate is held as a rival of accepted loops (revoke_group).
-  auto rejectOrHold = [&](const Check& failed) {
-    std::string detail = failed.detail;
-    if (holdAsRival(c, qpos, mpos, failed.reason, &detail) || holdForGlobal(c, qpos, mpos, failed.reason, &detail))
-      return emit_.defer(c, detail, measured, t0);
-    return reject(failed.reason, failed.detail);
-  };
-
-  const std::string bad = graph_.checkLoop(c, &qpos, &mpos);
-  if (!bad.empty()) return reject(Reason::kInvalidInput, bad);
-  if (emit_.revoked(c))
-    return reject(Reason::kUnconfirmed, "this loop was revoked earlier: it is not accepted again");
-  const int qseq = graph_.sequenceAt(qpos), mseq = graph_.sequenceAt(mpos);
-  if (!graph_.connected(qpos, mpos)) {
-    std::ostringstream s;
-    if (qseq == mseq)
-      s << "keyframes " << c.match_index << " and " << c.query_index << " of sequence " << qseq
-        << " lie on either side of a keyframe jump accepted as a relocation, which no loop ties yet: "
-           "no trajectory prior; ";
-    else
-      s << "sequences " << mseq << " and " << qseq << " are not connected: no trajectory prior; ";
-    if (config_.host.confirm_without_prior) {
-      s << "held until " << config_.hold.confirm_count << " candidates between them agree (confirm_without_prior)";
-      hold(c, qpos, mpos, HoldKind::kNoPrior);
-      return emit_.defer(c, s.str(), measured, t0);
-    }
-    s << (config_.host.accept_without_prior ? "accepted by policy (accept_without_prior)"
-                                       : "rejected by policy (accept_without_prior=false)");
-    if (config_.host.accept_without_prior)
-      return emit_.accept(c, s.str(), measured, t0, Reason::kNoTrajectoryPrior);
-    return reject(Reason::kNoTrajectoryPrior, s.str());
+StageOutcome Verifier::act(Passage* p, StageOutcome out, const StageOutcome& failed) {
+  if (out.held && out.hold == HoldKind::kGlobal) {
+    HeldCandidate h = loops_.heldFor(p->c);
+    h.query_pos = p->qpos;
+    h.match_pos = p->mpos;
+    h.kind = HoldKind::kGlobal;
+    if (!addToGlobalPool(h)) return failed;
+    copies_.held(p->c);
+  } else if (out.held) {
+    hold(p->c, p->qpos, p->mpos, out.hold, out.d2);
+  } else if (out.keep_decided) {
+    pending_.valid = true;
+    pending_.candidate = p->c;
+    pending_.revision = graph_.revision();
+    pending_.decided = std::move(p->decided);
   }
-  if (qseq == 0 && mseq == 0)
-    return reject(Reason::kInvalidInput,
-                  "both keyframes are in sequence 0 (a loaded map, held fixed): nothing to verify");
-
-  Decided decided;
-  const RuleOutcome out = rule_->decide(c, qpos, mpos, t0, &measured, &decided);
-  std::string extended;
-  if (!out.check.passed && !extendsRevisit(c, qpos, mpos, out.check, t0, &measured, &decided, &extended))
-    return rejectOrHold(out.check);
-  if (out.hold) {
-    hold(c, qpos, mpos, out.kind, out.d2);
-    return emit_.defer(c, out.check.detail, measured, t0);
-  }
-  pending_.valid = true;
-  pending_.candidate = c;
-  pending_.revision = graph_.revision();
-  pending_.decided = std::move(decided);
-  // Only a loop the prior confirmed teaches the drift calibration; an extension's innovation is
-  // the drift the prior ruled out, or a false row's offset.
-  pending_.decided.calibrates = out.check.passed;
-  return emit_.accept(c, out.check.passed ? out.check.detail : extended, measured, t0);
+  return out;
 }
 
 std::pair<Verdict, Verdict> Verifier::compareTrials(const LoopCandidate& c, int condense_min_window) {
@@ -207,11 +169,11 @@ std::vector<LoopDecision> Verifier::takeDecisions() {
 
 size_t Verifier::heldCount() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  return held_.size() + emit_.heldCopies();
+  return held_.size() + copies_.waiting();
 }
 
 void Verifier::hold(const LoopCandidate& c, size_t qpos, size_t mpos, HoldKind kind, double d2) {
-  emit_.held(c);
+  copies_.held(c);
   HeldCandidate h = loops_.heldFor(c);
   h.query_pos = qpos;
   h.match_pos = mpos;

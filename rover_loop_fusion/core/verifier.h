@@ -49,9 +49,15 @@
 #pragma once
 
 #include "rover_loop_fusion/core/accepted_loops.h"
+#include "rover_loop_fusion/core/copies.h"
 #include "rover_loop_fusion/core/decision_rule.h"
 #include "rover_loop_fusion/core/held_candidates.h"
 #include "rover_loop_fusion/core/pose_graph.h"
+#include "rover_loop_fusion/core/stage.h"
+#include "rover_loop_fusion/core/stage_decide.h"
+#include "rover_loop_fusion/core/stage_hold.h"
+#include "rover_loop_fusion/core/stage_input.h"
+#include "rover_loop_fusion/core/stage_prior.h"
 #include "rover_loop_fusion/core/types.h"
 #include "rover_loop_fusion/core/verdict_emitter.h"
 
@@ -134,26 +140,17 @@ class Verifier {
   std::pair<Verdict, Verdict> compareTrials(const LoopCandidate& candidate, int condense_min_window);
 
  private:
-  Verdict verifyLocked(const LoopCandidate& c, std::chrono::steady_clock::time_point t0);
+  /// What verify()'s last stage said, acted on: a candidate to hold is held (the global pool for
+  /// kGlobal: the rule's rejection `failed` stands if it does not qualify), an accepted one's
+  /// decided work kept for commit().
+  StageOutcome act(Passage* p, StageOutcome out, const StageOutcome& failed);
   /// Holds a candidate (a deferred verdict) and settles what is due.
   void hold(const LoopCandidate& c, size_t query_pos, size_t match_pos, HoldKind kind, double d2 = 0.0);
   Status commitLocked(const LoopCandidate& c, bool update_estimate);
-  /// revoke_group: holds a candidate rejected for `reason` as a rival if it contradicts an
-  /// accepted loop of its stretch (appends why to *detail); false if it stays rejected.
-  bool holdAsRival(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
-  /// decision revisit, revisit_extend: whether a candidate the rule rejected for `failed`
-  /// (innovation gate or score) extends accepted loops of its revisit (core/types.h); if so, its
-  /// trial is in *decided (run here if the gate stopped it before one), *detail says why.
-  bool extendsRevisit(const LoopCandidate& c, size_t query_pos, size_t match_pos, const Check& failed,
-                      std::chrono::steady_clock::time_point t0, Verdict* measured, Decided* decided,
-                      std::string* detail);
   /// A confirmed group of rivals that outnumbers the `loops` it contradicts: revoke them and
   /// release the rivals that pass against the graph without them, or put everything back and
   /// drop the group.
   void settleRivals(const HeldGroup& group, const std::vector<LoopCandidate>& loops);
-  /// global_check: holds a candidate rejected for `reason` in the global pool (appends why to
-  /// *detail); false if it stays rejected (core/global_release.cpp).
-  bool holdForGlobal(const LoopCandidate& c, size_t query_pos, size_t match_pos, Reason reason, std::string* detail);
   /// global_check: a candidate (held for the pool, or a member of a dropped revisit hypothesis)
   /// joins the global pool (the oldest is dropped when it is full); false if it does not qualify
   /// (then it is rejected or dropped).
@@ -214,8 +211,15 @@ class Verifier {
     }
   };
   GlobalInputs last_global_inputs_;
-  /// Every verdict and decision leaves through it; it keeps the queue and the copies' bookkeeping.
-  VerdictEmitter emit_;
+  /// What the copies of a candidate get (also verify()'s copies stage).
+  Copies copies_;
+  /// Every verdict and decision leaves through it; it keeps the queue of decisions.
+  VerdictEmitter emit_{copies_};
+  /// verify()'s stages, in the order they run (Copies between input and prior).
+  InputStage input_{graph_};
+  PriorStage prior_{config_.host, config_.hold, graph_};
+  DecideStage decide_{config_, graph_, *rule_, loops_};
+  HoldStage hold_stage_{config_.hold, config_.global, config_.decision, loops_};
 };
 
 }  // namespace core
