@@ -245,6 +245,7 @@ void VerifierNode::finish() {
 
 void VerifierNode::receive(Incoming item) {
   bool schedule = false;
+  item.received = ros::WallTime::now().toSec();
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
     if (!receiving_) return;
@@ -541,7 +542,16 @@ void VerifierNode::wake(int64_t ns, int64_t index) {
 }
 
 void VerifierNode::expire() {
-  const double deadline = ros::WallTime::now().toSec() - params_.candidate_timeout;
+  // A candidate waits candidate_timeout for what arrives after it: time in which the node has
+  // processed what arrived. While messages wait in the inbox (a burst, a loaded machine), the
+  // wait is counted up to the oldest of them, so that a keyframe received in time is never
+  // behind its candidate's timeout.
+  double horizon = ros::WallTime::now().toSec();
+  {
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    if (!inbox_.empty()) horizon = std::min(horizon, inbox_.front().received);
+  }
+  const double deadline = horizon - params_.candidate_timeout;
   uint64_t id;
   while (waiting_.oldestBefore(deadline, &id)) {  // arrival order is waiting order
     const LoopCandidate msg = waiting_.take(id);

@@ -134,6 +134,7 @@ class VerifierNode {
     LoopCandidate::ConstPtr candidate;
     bool dropped = false;
     int64_t dropped_stamp_ns = 0;
+    double received = 0.0;  ///< [s, wall clock] when the receiver thread took it
   };
   class DrainCallback;
 

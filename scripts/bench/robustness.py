@@ -69,18 +69,19 @@ def flag_value(flags, name):
 
 def setting_flags(flags, setting):
     """(the flags a setting appends, {parameter: the value it runs with}) for a case's flags: the
-    values scaled are the YAML's (--config), or a flag of the case's that overrides it."""
-    cfg = flag_value(flags, "config")
+    values scaled are the YAMLs' (every --config, in order: the template, then the override), or
+    a flag of the case's that overrides them."""
+    cfgs = [flags[i + 1] for i, f in enumerate(flags[:-1]) if f == "--config"]
     y = {}
-    if cfg:
+    for cfg in cfgs:
         with open(cfg) as f:
-            y = yaml.safe_load(f) or {}
+            y.update(yaml.safe_load(f) or {})
     values = {}
     for key in SCALED:
         v = flag_value(flags, key)
         if v is None:
             if key not in y:
-                raise ValueError(f"{cfg} has no {key}: give it in the case's flags")
+                raise ValueError(f"{', '.join(cfgs) or 'no --config'}: no {key}; give it in the case's flags")
             v = y[key]
         values[key] = float(v)
     extra = []
