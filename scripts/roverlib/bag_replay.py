@@ -146,11 +146,14 @@ class _Decidable:
 
 
 def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, final_timeout=60.0,
-         stamp_tolerance=1e-3, keyframe_topic=None, candidate_topic=None, progress=None):
+         stamp_tolerance=1e-3, keyframe_topic=None, candidate_topic=None, progress=None, keyframes_first=False):
     """Publishes the bag's keyframe poses and candidates into the nodes of `clients`.
 
     rate > 0: also paced at `rate` x the bag's time (for watching in rviz); 0: as fast as the
     nodes verify. keyframe_topic / candidate_topic: publish there instead of the bag's topics.
+    keyframes_first: before a candidate, wait until every node has received the keyframe messages
+    published before it (topics are not ordered with each other: a candidate may otherwise overtake
+    the keyframes just before it, e.g. the one that shows an earlier keyframe was stamped late).
     Returns (keyframe messages, candidate messages) published. Raises ReplayError when a node
     does not connect or stops answering."""
     import rospy
@@ -187,7 +190,7 @@ def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, f
 
     decidable = _Decidable(stamp_tolerance)
     waiting = collections.deque()  # candidates published before they could be decided
-    n_kf = n_decidable = n_cand = 0
+    n_kf = n_decidable = n_cand = synced = 0
     start_wall, start_bag = time.monotonic(), plan[0][0].to_sec()
     for t, kind, pub, msg in plan:
         if rospy.is_shutdown():
@@ -213,6 +216,10 @@ def play(bag_path, clients, rate=0.0, connect_timeout=60.0, step_timeout=60.0, f
             if progress and n_kf % 100 == 0:
                 progress(n_kf, n_cand)
         else:
+            if keyframes_first and n_kf > synced:
+                for c in clients:
+                    c.optimize(n_kf, step_timeout)
+                synced = n_kf
             pub.publish(msg)
             n_cand += 1
             if decidable(msg):

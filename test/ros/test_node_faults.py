@@ -85,7 +85,7 @@ class NodeFaults(unittest.TestCase):
                         {"optimize_period": 0.0, "rover/time_budget_ms": 0.0})
             try:
                 client = bag_replay.VerifierClient(node.name)
-                bag_replay.play(bag_path, [client])
+                bag_replay.play(bag_path, [client], keyframes_first=True)  # the hosts see the same order
                 verdicts = client.current()
                 log = node.output()
             finally:
