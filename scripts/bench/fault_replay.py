@@ -30,6 +30,7 @@ whole and the faulty recall is within 0.02 of the clean one in both hosts.
 Needs the package built and sourced (scripts/test.sh or scripts/demo.sh do that); runs its own
 roscore on a free port."""
 import argparse
+import collections
 import csv
 import os
 import re
@@ -91,9 +92,7 @@ def run_replay(run, f, out_dir):
     r = figures(run, [(int(x["query_index"]), int(x["match_index"]), x["accepted"] == "1") for x in rows],
                 len(f.scenario.candidates), labels)
     r["wall"] = time.time() - t0
-    r["reasons"] = {}
-    for x in rows:
-        r["reasons"][x["reason"]] = r["reasons"].get(x["reason"], 0) + 1
+    r["reasons"] = collections.Counter(x["reason"] for x in rows)
     return r
 
 
@@ -215,9 +214,7 @@ def run_node(a, run, name, messages, labels, n_cand, env, out_dir, queue_size, d
     r = figures(run, [(v.query_index, v.match_index, v.accepted) for v in finals], n_cand, labels)
     text = open(os.path.join(out_dir, "node.txt")).read()
     lost = re.findall(r"(\d+) of (\d+) verdict rows were not written", text)
-    reasons = {}
-    for v in finals:
-        reasons[v.reason] = reasons.get(v.reason, 0) + 1
+    reasons = collections.Counter(v.reason for v in finals)
     r.update(held=held, messages=n_msgs, wall=wall, rows=rows, whole=whole, header=header,
              lost=f"{lost[-1][0]} of {lost[-1][1]}" if lost else "none reported",
              reasons=reasons, raised="raised to" in text and "queue_size" in text)
